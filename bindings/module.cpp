@@ -1,0 +1,209 @@
+// simbake._core: a thin layer over the C++ core. Converts numpy arrays to Eigen and back,
+// releases the GIL while the world steps, and turns C++ exceptions into Python ones
+// (std::invalid_argument -> ValueError, std::runtime_error -> RuntimeError). No physics here.
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "geometry/mass_properties.h"
+#include "geometry/mesh.h"
+#include "levelset/vdb_levelset.h"
+#include "world/world.h"
+
+namespace py = pybind11;
+using namespace simbake;
+
+namespace {
+
+using Quats = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>;  // (n x 4) [w, x, y, z]
+
+// A signed distance handle for Python; `grid` is set when it is an OpenVDB level set
+struct LevelSet {
+  SignedDistancePtr distance;
+  std::shared_ptr<VdbLevelSet> grid;
+};
+
+TriangleMesh to_mesh(const Points& vertices, const Triangles& triangles) {
+  if (triangles.size() > 0 && (triangles.minCoeff() < 0 || triangles.maxCoeff() >= vertices.rows())) {
+    throw std::invalid_argument("triangle index out of range");
+  }
+  return TriangleMesh{vertices, triangles};
+}
+
+py::tuple mesh_tuple(const TriangleMesh& mesh) { return py::make_tuple(mesh.vertices, mesh.triangles); }
+
+py::dict mass_dict(const MassProperties& m) {
+  py::dict d;
+  d["volume"] = m.volume;
+  d["center"] = m.center;
+  d["inertia"] = m.inertia;
+  return d;
+}
+
+MassProperties mass_from_dict(const py::dict& d) {
+  MassProperties m;
+  m.volume = d["volume"].cast<double>();
+  m.center = d["center"].cast<Vec3>();
+  m.inertia = d["inertia"].cast<Mat3>();
+  return m;
+}
+
+Quat quat_wxyz(const Eigen::Vector4d& q) { return Quat(q[0], q[1], q[2], q[3]); }
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "simbake C++ core: meshes, level sets, rigid-body world";
+  m.attr("__version__") = SIMBAKE_VERSION;
+
+  // geometry
+  m.def("sphere_mesh", [](double r, int s) { return mesh_tuple(make_sphere_mesh(r, s)); },
+        py::arg("radius"), py::arg("subdivisions"));
+  m.def("box_mesh", [](const Vec3& size, int s) { return mesh_tuple(make_box_mesh(size, s)); },
+        py::arg("size"), py::arg("subdivisions"));
+  m.def("vertex_normals", [](const Points& v, const Triangles& t) { return vertex_normals(to_mesh(v, t)); },
+        py::arg("vertices"), py::arg("triangles"));
+  m.def("is_closed", [](const Points& v, const Triangles& t) { return is_closed(to_mesh(v, t)); },
+        py::arg("vertices"), py::arg("triangles"));
+  m.def("mass_properties", [](const Points& v, const Triangles& t) { return mass_dict(mass_properties(to_mesh(v, t))); },
+        py::arg("vertices"), py::arg("triangles"));
+  m.def("sphere_mass_properties", [](double r) { return mass_dict(sphere_mass_properties(r)); }, py::arg("radius"));
+  m.def("box_mass_properties", [](const Vec3& s) { return mass_dict(box_mass_properties(s)); }, py::arg("size"));
+
+  // level sets
+  py::class_<LevelSet>(m, "LevelSet")
+      .def_static("sphere", [](double r) { return LevelSet{std::make_shared<SphereDistance>(r), nullptr}; })
+      .def_static("box", [](const Vec3& size) { return LevelSet{std::make_shared<BoxDistance>(size), nullptr}; })
+      .def_static("bake", [](const Points& v, const Triangles& t, double voxel_size) {
+            to_mesh(v, t);
+            std::shared_ptr<VdbLevelSet> grid;
+            {
+              py::gil_scoped_release release;
+              grid = VdbLevelSet::bake(v, t, voxel_size);
+            }
+            return LevelSet{grid, grid};
+          }, py::arg("vertices"), py::arg("triangles"), py::arg("voxel_size"))
+      .def_static("read", [](const std::string& path) {
+            auto grid = VdbLevelSet::read(path);
+            return LevelSet{grid, grid};
+          }, py::arg("path"))
+      .def("write", [](const LevelSet& ls, const std::string& path) {
+            if (!ls.grid) throw std::invalid_argument("only baked level sets are written to .vdb");
+            ls.grid->write(path);
+          }, py::arg("path"))
+      .def("phi", [](const LevelSet& ls, const Points& p) {
+            Eigen::VectorXd out(p.rows());
+            for (Eigen::Index i = 0; i < p.rows(); ++i) out[i] = ls.distance->phi(p.row(i).transpose());
+            return out;
+          }, py::arg("points"))
+      .def("normals", [](const LevelSet& ls, const Points& p) {
+            Points out(p.rows(), 3);
+            for (Eigen::Index i = 0; i < p.rows(); ++i) {
+              Vec3 n;
+              ls.distance->phi_and_normal(p.row(i).transpose(), n);
+              out.row(i) = n.transpose();
+            }
+            return out;
+          }, py::arg("points"))
+      .def_property_readonly("bounds", [](const LevelSet& ls) {
+            const Box3 b = ls.distance->bounds();
+            return py::make_tuple(Vec3(b.min()), Vec3(b.max()));
+          })
+      .def_property_readonly("voxel_size", [](const LevelSet& ls) { return ls.grid ? ls.grid->voxel_size() : 0.0; })
+      .def_property_readonly("active_voxel_count", [](const LevelSet& ls) { return ls.grid ? ls.grid->active_voxel_count() : 0; })
+      .def_property_readonly("memory_bytes", [](const LevelSet& ls) { return ls.grid ? ls.grid->memory_bytes() : 0; });
+
+  // the world
+  py::class_<World>(m, "World")
+      .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
+                       double travel_fraction, int max_substeps) {
+             WorldSettings s;
+             s.gravity = gravity;
+             s.collision_sweeps = collision_sweeps;
+             s.contact_sweeps = contact_sweeps;
+             s.max_substep = max_substep;
+             s.travel_fraction = travel_fraction;
+             s.max_substeps = max_substeps;
+             return World(s);
+           }),
+           py::arg("gravity") = WorldSettings().gravity,
+           py::arg("collision_sweeps") = WorldSettings().collision_sweeps,
+           py::arg("contact_sweeps") = WorldSettings().contact_sweeps,
+           py::arg("max_substep") = WorldSettings().max_substep,
+           py::arg("travel_fraction") = WorldSettings().travel_fraction,
+           py::arg("max_substeps") = WorldSettings().max_substeps)
+      .def("set_ground", [](World& w, double height, double friction, double restitution) {
+             w.set_ground(GroundDef{height, friction, restitution});
+           }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)
+      .def("add_body", [](World& w, const LevelSet& shape, const Points& samples, const py::dict& mass_properties,
+                          double mass, const Vec3& origin, const Eigen::Vector4d& orientation,
+                          const Vec3& linear_velocity, const Vec3& angular_velocity, double friction,
+                          double restitution, bool kinematic) {
+             BodyDesc d;
+             d.shape = shape.distance;
+             d.samples = samples;
+             d.unit_mass = mass_from_dict(mass_properties);
+             d.mass = mass;
+             d.origin = origin;
+             d.orientation = quat_wxyz(orientation);
+             d.linear_velocity = linear_velocity;
+             d.angular_velocity = angular_velocity;
+             d.friction = friction;
+             d.restitution = restitution;
+             d.kinematic = kinematic;
+             return w.add_body(d);
+           },
+           py::arg("shape"), py::arg("samples"), py::arg("mass_properties"), py::arg("mass"),
+           py::arg("origin"), py::arg("orientation"), py::arg("linear_velocity") = Vec3::Zero(),
+           py::arg("angular_velocity") = Vec3::Zero(), py::arg("friction") = 0.5,
+           py::arg("restitution") = 0.0, py::arg("kinematic") = false)
+      .def("step_frame", &World::step_frame, py::arg("frame_dt"), py::arg("substeps") = 0,
+           py::call_guard<py::gil_scoped_release>())
+      .def("step", &World::step, py::arg("dt"), py::call_guard<py::gil_scoped_release>())
+      .def("automatic_substeps", &World::automatic_substeps, py::arg("frame_dt"))
+      .def_property_readonly("body_count", &World::body_count)
+      .def("mesh_poses", [](const World& w) {
+             Points translations(w.body_count(), 3);
+             Quats orientations(w.body_count(), 4);
+             for (int i = 0; i < w.body_count(); ++i) {
+               const Pose pose = w.body_mesh_pose(i);
+               translations.row(i) = pose.translation.transpose();
+               const Quat q(pose.rotation);
+               orientations.row(i) << q.w(), q.x(), q.y(), q.z();
+             }
+             return py::make_tuple(translations, orientations);
+           }, "World pose of each body's mesh origin: translations (n, 3), orientations (n, 4) [w, x, y, z]")
+      .def("body_state", [](const World& w, int i) {
+             if (i < 0 || i >= w.body_count()) throw py::index_error("body index out of range");
+             const RigidBodyState& s = w.body_state(i);
+             py::dict d;
+             d["center_of_mass"] = s.x;
+             d["orientation"] = Eigen::Vector4d(s.q.w(), s.q.x(), s.q.y(), s.q.z());
+             d["linear_velocity"] = s.v;
+             d["angular_momentum"] = s.l;
+             d["angular_velocity"] = angular_velocity(w.body_def(i), s);
+             return d;
+           }, py::arg("index"))
+      .def("statistics", [](const World& w) {
+             const StepStatistics& s = w.statistics();
+             py::dict d;
+             d["substeps"] = s.substeps;
+             d["max_penetration"] = s.max_penetration;
+             d["kinetic_energy"] = s.kinetic_energy;
+             d["potential_energy"] = s.potential_energy;
+             d["impulses"] = s.impulses;
+             d["finite"] = s.finite;
+             return d;
+           })
+      .def("profile", [](const World& w) {
+             const StageProfile& p = w.profile();
+             py::dict d;
+             d["broad_phase"] = p.broad_phase;
+             d["collisions"] = p.collisions;
+             d["velocities"] = p.velocities;
+             d["contacts"] = p.contacts;
+             d["positions"] = p.positions;
+             d["statistics"] = p.statistics;
+             return d;
+           });
+}

@@ -1,0 +1,64 @@
+// Signed distance functions in a body's own (mesh) frame: negative inside, positive outside.
+//
+// The rigid and cloth solvers only see this interface. Analytic primitives (sphere, box,
+// plane) answer exactly and need no grid; meshes are baked into an OpenVDB grid
+// (vdb_levelset.h). Normals are the normalized gradient of phi, in the same frame; callers
+// rotate them into world space with the body's orientation.
+#pragma once
+
+#include "math/types.h"
+
+#include <memory>
+
+namespace simbake {
+
+class SignedDistance {
+ public:
+  virtual ~SignedDistance() = default;
+  // phi(p) (m), negative inside
+  virtual double phi(const Vec3& p) const = 0;
+  // phi(p) and the unit outward normal at p; the normal is always a unit vector
+  virtual double phi_and_normal(const Vec3& p, Vec3& normal) const = 0;
+  // box that contains the whole zero level set (the solid)
+  virtual Box3 bounds() const = 0;
+};
+
+using SignedDistancePtr = std::shared_ptr<const SignedDistance>;
+
+// Sphere of radius r centred at the origin
+class SphereDistance final : public SignedDistance {
+ public:
+  explicit SphereDistance(double radius);
+  double phi(const Vec3& p) const override;
+  double phi_and_normal(const Vec3& p, Vec3& normal) const override;
+  Box3 bounds() const override;
+
+ private:
+  double radius_;  // (m)
+};
+
+// Axis-aligned box with the given full edge lengths, centred at the origin
+class BoxDistance final : public SignedDistance {
+ public:
+  explicit BoxDistance(const Vec3& size);
+  double phi(const Vec3& p) const override;
+  double phi_and_normal(const Vec3& p, Vec3& normal) const override;
+  Box3 bounds() const override;
+
+ private:
+  Vec3 half_;  // half edge lengths (m)
+};
+
+// Half space below the plane y = height (the ground); bounds are infinite below it
+class PlaneDistance final : public SignedDistance {
+ public:
+  explicit PlaneDistance(double height);
+  double phi(const Vec3& p) const override;
+  double phi_and_normal(const Vec3& p, Vec3& normal) const override;
+  Box3 bounds() const override;
+
+ private:
+  double height_;  // (m)
+};
+
+}  // namespace simbake

@@ -1,0 +1,252 @@
+// VdbLevelSet: a closed mesh baked into an OpenVDB FloatGrid signed distance field.
+//
+// Design:
+// - Band: `exterior_band` voxels outside the surface (active voxels with phi < band * h);
+//   beyond it the grid returns its background, +band * h. Callers only need exact values
+//   near and inside the surface, so a thin exterior band keeps the grid small.
+// - Filled interior: the interior band is half the mesh's largest extent (in voxels) + 2,
+//   deeper than any interior point can be, so every voxel inside the body holds a real
+//   negative distance. Rigid collisions query sample points deep inside other bodies.
+// - Queries: trilinear interpolation of the 8 voxel values around the point; the normal is
+//   the exact gradient of that trilinear interpolant, normalized. Where the gradient
+//   vanishes (outside the band every corner holds the background), the normal falls back to
+//   the direction from the centre of the active bounding box to p (+y at the centre).
+// - Thread safety: the grid is immutable after bake/read; each query builds its own
+//   *unsafe* (unregistered) ValueAccessor on the stack. The default "safe"
+//   FloatGrid::ConstAccessor registers itself in the tree's concurrent hash map on
+//   construction (a heap allocation and a shared lock per query); registration only serves
+//   to clear caches when the tree is modified, which never happens here.
+#include "levelset/vdb_levelset.h"
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/MeshToVolume.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+#include <stdexcept>
+#include <vector>
+
+namespace simbake {
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::FloatGrid;
+using openvdb::FloatTree;
+// unregistered accessor: no allocation, no lock (see the file comment)
+using QueryAccessor = openvdb::tree::ValueAccessor<const FloatTree, /*IsSafe=*/false>;
+
+// gradient magnitude (dimensionless for a distance field, ~1 in the band) below which the
+// trilinear gradient is treated as zero and the fallback normal is used
+constexpr double kMinGradient = 1e-6;
+
+const char* const kGridName = "surface";
+
+void initialize_openvdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+// 8 corner values around world point p and the fractional position inside that cell
+struct Cell {
+  float v[2][2][2];  // v[i][j][k]: corner (x0 + i, y0 + j, z0 + k)
+  double u, w, t;    // fractional coordinates along x, y, z in [0, 1)
+};
+
+inline Cell fetch_cell(const FloatTree& tree, const openvdb::math::Transform& xform,
+                       const Vec3& p) {
+  const openvdb::Vec3d x = xform.worldToIndex(openvdb::Vec3d(p.x(), p.y(), p.z()));
+  const openvdb::Vec3d f(std::floor(x[0]), std::floor(x[1]), std::floor(x[2]));
+  Cell c;
+  c.u = x[0] - f[0];
+  c.w = x[1] - f[1];
+  c.t = x[2] - f[2];
+  QueryAccessor acc(tree);
+  openvdb::tools::BoxSampler::getValues(c.v, acc, Coord::floor(f));
+  return c;
+}
+
+inline double lerp(double a, double b, double s) { return a + s * (b - a); }
+
+// trilinear interpolant at the cell's fractional position
+inline double interpolate(const Cell& c) {
+  const double x00 = lerp(c.v[0][0][0], c.v[1][0][0], c.u);
+  const double x10 = lerp(c.v[0][1][0], c.v[1][1][0], c.u);
+  const double x01 = lerp(c.v[0][0][1], c.v[1][0][1], c.u);
+  const double x11 = lerp(c.v[0][1][1], c.v[1][1][1], c.u);
+  return lerp(lerp(x00, x10, c.w), lerp(x01, x11, c.w), c.t);
+}
+
+}  // namespace
+
+struct VdbLevelSet::Impl {
+  FloatGrid::ConstPtr grid;
+  const FloatTree* tree = nullptr;
+  const openvdb::math::Transform* xform = nullptr;
+  Box3 active_box;  // world box of the active voxel centres
+  Vec3 centre;      // its centre: origin of the fallback normal
+  double band = 0;  // background value: the exterior band width (m)
+
+  explicit Impl(FloatGrid::ConstPtr g) : grid(std::move(g)) {
+    tree = &grid->tree();
+    xform = &grid->transform();
+    band = double(grid->background());
+    // world box of the active voxels (all eight corners of the index box, for any linear map)
+    const openvdb::CoordBBox ibox = grid->evalActiveVoxelBoundingBox();
+    active_box.setEmpty();
+    if (!ibox.empty()) {
+      for (int corner = 0; corner < 8; ++corner) {
+        const openvdb::Vec3d ijk((corner & 1 ? ibox.max() : ibox.min()).x(),
+                                 (corner & 2 ? ibox.max() : ibox.min()).y(),
+                                 (corner & 4 ? ibox.max() : ibox.min()).z());
+        const openvdb::Vec3d w = xform->indexToWorld(ijk);
+        active_box.extend(Vec3(w[0], w[1], w[2]));
+      }
+      centre = active_box.center();
+    } else {
+      centre = Vec3::Zero();
+    }
+  }
+};
+
+VdbLevelSet::VdbLevelSet(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+VdbLevelSet::~VdbLevelSet() = default;
+
+std::shared_ptr<VdbLevelSet> VdbLevelSet::bake(const Points& vertices,
+                                               const Triangles& triangles, double voxel_size,
+                                               int exterior_band) {
+  // validate the input
+  if (!(voxel_size > 0.0) || !std::isfinite(voxel_size))
+    throw std::invalid_argument("VdbLevelSet::bake: voxel size must be a positive finite number");
+  if (exterior_band < 3)
+    throw std::invalid_argument("VdbLevelSet::bake: exterior band must be at least 3 voxels");
+  if (vertices.rows() == 0 || triangles.rows() == 0)
+    throw std::invalid_argument("VdbLevelSet::bake: empty mesh (no vertices or no triangles)");
+  if (!vertices.allFinite())
+    throw std::invalid_argument("VdbLevelSet::bake: vertex coordinates must be finite");
+  const Eigen::Index n = vertices.rows();
+  if (triangles.minCoeff() < 0 || triangles.maxCoeff() >= n)
+    throw std::invalid_argument("VdbLevelSet::bake: triangle vertex index out of range [0, " +
+                                std::to_string(n) + ")");
+  const Vec3 lo = vertices.colwise().minCoeff(), hi = vertices.colwise().maxCoeff();
+  if (std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()) / voxel_size > 1e7)
+    throw std::invalid_argument("VdbLevelSet::bake: voxel size too small for the mesh extent");
+
+  initialize_openvdb();
+
+  // mesh in index space (voxel centres at integer coordinates)
+  const openvdb::math::Transform::Ptr xform =
+      openvdb::math::Transform::createLinearTransform(voxel_size);
+  std::vector<openvdb::Vec3s> points(static_cast<std::size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i)
+    points[i] = openvdb::Vec3s(float(vertices(i, 0) / voxel_size),
+                               float(vertices(i, 1) / voxel_size),
+                               float(vertices(i, 2) / voxel_size));
+  std::vector<openvdb::Vec3I> tris(static_cast<std::size_t>(triangles.rows()));
+  for (Eigen::Index t = 0; t < triangles.rows(); ++t)
+    tris[t] = openvdb::Vec3I(openvdb::Index32(triangles(t, 0)), openvdb::Index32(triangles(t, 1)),
+                             openvdb::Index32(triangles(t, 2)));
+
+  // signed distance with a thin exterior band and an interior band deeper than any
+  // interior point (half the largest extent bounds the depth), so the interior is filled
+  const float interior_band = float(0.5 * (hi - lo).maxCoeff() / voxel_size + 2.0);
+  const openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> mesh(
+      points, tris);
+  FloatGrid::Ptr grid = openvdb::tools::meshToVolume<FloatGrid>(mesh, *xform,
+                                                                float(exterior_band), interior_band);
+  grid->setName(kGridName);
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  if (grid->activeVoxelCount() == 0)
+    throw std::invalid_argument("VdbLevelSet::bake: mesh produced no voxels (degenerate mesh?)");
+
+  return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
+}
+
+std::shared_ptr<VdbLevelSet> VdbLevelSet::read(const std::string& path) {
+  initialize_openvdb();
+  // open the file; OpenVDB's IoError says little, so re-throw with the path
+  openvdb::io::File file(path);
+  try {
+    file.open();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot open as a .vdb file (" + e.what() + ")");
+  }
+  // first FloatGrid in the file
+  FloatGrid::Ptr grid;
+  for (const openvdb::GridBase::Ptr& g : *file.getGrids()) {
+    grid = openvdb::gridPtrCast<FloatGrid>(g);
+    if (grid) break;
+  }
+  file.close();
+  if (!grid) throw std::runtime_error(path + ": no float grid in the file");
+  return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
+}
+
+void VdbLevelSet::write(const std::string& path) const {
+  // the grid is shared, not copied
+  const openvdb::GridCPtrVec grids{impl_->grid};
+  openvdb::io::File file(path);
+  // blosc when this OpenVDB build has it (Debian's does), zip otherwise
+  file.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK |
+                      (openvdb::io::Archive::hasBloscCompression() ? openvdb::io::COMPRESS_BLOSC
+                                                                   : openvdb::io::COMPRESS_ZIP));
+  try {
+    file.write(grids);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot write .vdb file (" + e.what() + ")");
+  }
+  file.close();
+}
+
+double VdbLevelSet::phi(const Vec3& p) const {
+  return interpolate(fetch_cell(*impl_->tree, *impl_->xform, p));
+}
+
+double VdbLevelSet::phi_and_normal(const Vec3& p, Vec3& normal) const {
+  const Cell c = fetch_cell(*impl_->tree, *impl_->xform, p);
+  const auto& v = c.v;
+  // partial derivatives of the trilinear interpolant in index space
+  const double gx = lerp(lerp(v[1][0][0] - v[0][0][0], v[1][1][0] - v[0][1][0], c.w),
+                         lerp(v[1][0][1] - v[0][0][1], v[1][1][1] - v[0][1][1], c.w), c.t);
+  const double gy = lerp(lerp(v[0][1][0] - v[0][0][0], v[1][1][0] - v[1][0][0], c.u),
+                         lerp(v[0][1][1] - v[0][0][1], v[1][1][1] - v[1][0][1], c.u), c.t);
+  const double gz = lerp(lerp(v[0][0][1] - v[0][0][0], v[1][0][1] - v[1][0][0], c.u),
+                         lerp(v[0][1][1] - v[0][1][0], v[1][1][1] - v[1][1][0], c.u), c.w);
+  // to world space (inverse Jacobian transpose; a plain 1/h for our uniform transforms)
+  const openvdb::Vec3d g = impl_->xform->baseMap()->applyIJT(openvdb::Vec3d(gx, gy, gz));
+  const Vec3 grad(g[0], g[1], g[2]);
+  const double len = grad.norm();
+  if (len > kMinGradient) {
+    normal = grad / len;
+  } else {
+    // flat region (outside the band): point away from the centre of the grid
+    const Vec3 d = p - impl_->centre;
+    const double dn = d.norm();
+    normal = dn > 0.0 ? Vec3(d / dn) : Vec3::UnitY();
+  }
+  return interpolate(c);
+}
+
+Box3 VdbLevelSet::bounds() const {
+  // The outermost active voxel centre lies between (band - 1) and band voxels outside the
+  // surface, so shrinking by band - 1 voxels still contains the zero level set.
+  if (impl_->active_box.isEmpty()) return impl_->active_box;
+  const double shrink = std::max(0.0, impl_->band - voxel_size());
+  Box3 b(impl_->active_box.min().array() + shrink, impl_->active_box.max().array() - shrink);
+  if (b.isEmpty()) b = Box3(impl_->centre, impl_->centre);
+  return b;
+}
+
+double VdbLevelSet::voxel_size() const { return impl_->xform->voxelSize()[0]; }
+
+std::size_t VdbLevelSet::active_voxel_count() const {
+  return static_cast<std::size_t>(impl_->grid->activeVoxelCount());
+}
+
+std::size_t VdbLevelSet::memory_bytes() const {
+  return static_cast<std::size_t>(impl_->grid->memUsage());
+}
+
+}  // namespace simbake

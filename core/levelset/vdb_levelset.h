@@ -1,0 +1,47 @@
+// A closed triangle mesh baked into an OpenVDB FloatGrid signed distance field.
+//
+// This is the only header of the core that knows OpenVDB exists (the grid lives behind a
+// pimpl). The grid is a narrow band outside the surface and filled all the way through the
+// interior, so a point anywhere inside the body gets a valid (negative) distance: rigid
+// collisions query sample points deep inside other bodies. Outside the band phi is clamped to
+// the band width; the normal there falls back to the direction from the grid's centre.
+#pragma once
+
+#include "levelset/signed_distance.h"
+
+#include <memory>
+#include <string>
+
+namespace simbake {
+
+class VdbLevelSet final : public SignedDistance {
+ public:
+  // Bake a closed mesh (vertices (n x 3) in metres, triangles (m x 3)) at voxel size h (m).
+  // exterior_band: width of the band outside the surface, in voxels (>= 3).
+  static std::shared_ptr<VdbLevelSet> bake(const Points& vertices, const Triangles& triangles,
+                                           double voxel_size, int exterior_band = 3);
+  // Read the first FloatGrid of a .vdb file written by write() (or any level-set .vdb)
+  static std::shared_ptr<VdbLevelSet> read(const std::string& path);
+  // Write the grid (named "surface", class level set) to a .vdb file any OpenVDB reader opens
+  void write(const std::string& path) const;
+
+  ~VdbLevelSet() override;
+
+  // trilinear interpolation of phi (m)
+  double phi(const Vec3& p) const override;
+  // trilinear phi and the normalized gradient of the trilinear interpolant
+  double phi_and_normal(const Vec3& p, Vec3& normal) const override;
+  // bounds of the zero level set (the active voxels, shrunk by the exterior band)
+  Box3 bounds() const override;
+
+  double voxel_size() const;
+  std::size_t active_voxel_count() const;
+  std::size_t memory_bytes() const;
+
+ private:
+  struct Impl;
+  explicit VdbLevelSet(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace simbake

@@ -1,0 +1,59 @@
+#include "rigid/rigid_body.h"
+
+namespace simbake {
+
+Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state) {
+  // a mesh point m sits at x + R(q) P^T (m - c): rotation R(q) P^T, translation x - R c
+  Pose pose;
+  pose.rotation = state.q.toRotationMatrix() * def.mesh_axes.transpose();
+  pose.translation = state.x - pose.rotation * def.center;
+  return pose;
+}
+
+void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orientation,
+                   RigidBodyState& state) {
+  const Quat mesh_q = orientation.normalized();
+  state.q = (mesh_q * Quat(def.mesh_axes)).normalized();
+  state.x = origin + mesh_q * def.center;
+}
+
+Mat3 world_inverse_inertia(const RigidBodyDef& def, const Quat& q) {
+  const Mat3 R = q.toRotationMatrix();
+  return R * def.inverse_inertia.asDiagonal() * R.transpose();
+}
+
+Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state) {
+  const Vec3 body_l = state.q.conjugate() * state.l;
+  return state.q * Vec3(def.inverse_inertia.cwiseProduct(body_l));
+}
+
+Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt) {
+  // In the body frame the angular momentum is b = R^T L. The flow of the k-th term of the
+  // Hamiltonian H_k = b_k^2 / (2 I_k) rotates the body about its k-th axis by dt b_k / I_k
+  // (q <- q rot_k) and b the opposite way (b <- rot_k^-1 b); b_k itself is unchanged.
+  static constexpr int kAxis[5] = {0, 1, 2, 1, 0};
+  static constexpr double kFraction[5] = {0.5, 0.5, 1.0, 0.5, 0.5};
+  Quat result = q;
+  Vec3 b = q.conjugate() * l;
+  for (int s = 0; s < 5; ++s) {
+    const int k = kAxis[s];
+    const double angle = kFraction[s] * dt * b[k] * def.inverse_inertia[k];
+    if (angle == 0.0) continue;
+    const Quat rotation(Eigen::AngleAxisd(angle, Vec3::Unit(k)));
+    result = result * rotation;
+    b = rotation.conjugate() * b;
+  }
+  return result.normalized();
+}
+
+Quat prescribed_rotation(const Quat& q, const Vec3& omega, double dt) {
+  return (quat_from_rotation_vector(dt * omega) * q).normalized();
+}
+
+double kinetic_energy(const RigidBodyDef& def, const RigidBodyState& state) {
+  if (def.kinematic) return 0.0;
+  const double linear = 0.5 * state.v.squaredNorm() / def.inverse_mass;
+  return linear + 0.5 * state.l.dot(angular_velocity(def, state));
+}
+
+}  // namespace simbake

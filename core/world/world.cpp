@@ -1,0 +1,188 @@
+// World construction, the frame loop, the automatic substep rule and statistics.
+// The stages themselves are in rigid_stages.cpp.
+#include "world/world.h"
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace simbake {
+
+namespace {
+
+// Adds the wall time of its scope to a profile entry
+class ScopedTimer {
+ public:
+  explicit ScopedTimer(double& total) : total_(total), start_(std::chrono::steady_clock::now()) {}
+  ~ScopedTimer() {
+    total_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+ private:
+  double& total_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+void require(bool ok, const std::string& what) {
+  if (!ok) throw std::invalid_argument(what);
+}
+
+bool finite(const Vec3& v) { return v.allFinite(); }
+
+}  // namespace
+
+World::World(const WorldSettings& settings) : settings_(settings) {
+  require(settings.gravity.allFinite(), "gravity must be finite");
+  require(settings.collision_sweeps >= 0 && settings.contact_sweeps >= 0, "sweeps must be >= 0");
+  require(settings.max_substep > 0.0 && settings.travel_fraction > 0.0, "substep limits must be > 0");
+  require(settings.max_substeps >= 1, "max_substeps must be >= 1");
+}
+
+void World::set_ground(const GroundDef& ground) {
+  require(std::isfinite(ground.height), "ground height must be finite");
+  require(ground.friction >= 0.0 && std::isfinite(ground.friction), "ground friction must be >= 0");
+  require(ground.restitution >= 0.0 && ground.restitution <= 1.0, "ground restitution must be in [0, 1]");
+  ground_ = ground;
+}
+
+int World::add_body(const BodyDesc& desc) {
+  require(desc.shape != nullptr, "body needs a shape");
+  require(desc.samples.rows() > 0 && desc.samples.allFinite(), "body needs finite surface samples");
+  require(desc.kinematic || (desc.mass > 0.0 && std::isfinite(desc.mass)), "body mass must be > 0");
+  require(desc.unit_mass.volume > 0.0, "body shape must enclose a positive volume");
+  require(finite(desc.origin) && finite(desc.linear_velocity) && finite(desc.angular_velocity) &&
+              desc.orientation.coeffs().allFinite() && desc.orientation.norm() > 0.0,
+          "body pose and velocities must be finite");
+  require(desc.friction >= 0.0 && std::isfinite(desc.friction), "body friction must be >= 0");
+  require(desc.restitution >= 0.0 && desc.restitution <= 1.0, "body restitution must be in [0, 1]");
+
+  RigidBodyDef def;
+  def.kinematic = desc.kinematic;
+  def.friction = desc.friction;
+  def.restitution = desc.restitution;
+  def.shape = desc.shape;
+  def.samples = desc.samples;
+  def.center = desc.unit_mass.center;
+
+  // principal axes of the inertia tensor, as a proper rotation
+  Eigen::SelfAdjointEigenSolver<Mat3> eigen(desc.unit_mass.inertia);
+  Mat3 axes = eigen.eigenvectors();
+  if (axes.determinant() < 0.0) axes.col(2) = -axes.col(2);
+  def.mesh_axes = axes;
+  if (!desc.kinematic) {
+    const double density = desc.mass / desc.unit_mass.volume;  // (kg/m^3)
+    def.inverse_mass = 1.0 / desc.mass;
+    def.inertia = density * eigen.eigenvalues();
+    require(def.inertia.minCoeff() > 0.0, "body inertia must be positive (a flat shape?)");
+    def.inverse_inertia = def.inertia.cwiseInverse();
+  }
+  for (Eigen::Index s = 0; s < def.samples.rows(); ++s) {
+    const Vec3 p = def.samples.row(s);
+    def.bounding_radius = std::max(def.bounding_radius, (p - def.center).norm());
+  }
+  def.thickness = def.shape->bounds().sizes().minCoeff();
+
+  RigidBodyState state;
+  set_mesh_pose(def, desc.origin, desc.orientation, state);
+  state.v = desc.linear_velocity;
+  Vec3 spin = Vec3::Zero();
+  if (desc.kinematic) {
+    spin = desc.angular_velocity;
+  } else {
+    const Mat3 R = state.q.toRotationMatrix();
+    state.l = R * def.inertia.asDiagonal() * R.transpose() * desc.angular_velocity;
+  }
+  defs_.push_back(std::move(def));
+  states_.push_back(state);
+  spin_.push_back(spin);
+  candidates_.push_back(state);
+  candidate_poses_.push_back(mesh_pose(defs_.back(), state));
+  return body_count() - 1;
+}
+
+int World::automatic_substeps(double frame_dt) const {
+  // Each body may travel a fraction of its thickness per substep (no tunnelling through its
+  // thinnest part); its speed over the frame is bounded by the current speed of its fastest
+  // point plus what gravity adds in one frame.
+  double steps = std::ceil(frame_dt / settings_.max_substep);
+  for (int i = 0; i < body_count(); ++i) {
+    const RigidBodyDef& def = defs_[i];
+    const Vec3 omega = def.kinematic ? spin_[i] : angular_velocity(def, states_[i]);
+    double speed = states_[i].v.norm() + omega.norm() * def.bounding_radius;
+    if (!def.kinematic) speed += settings_.gravity.norm() * frame_dt;
+    steps = std::max(steps, std::ceil(speed * frame_dt / (settings_.travel_fraction * def.thickness)));
+  }
+  if (!std::isfinite(steps)) return settings_.max_substeps;
+  return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
+}
+
+int World::step_frame(double frame_dt, int substeps) {
+  require(frame_dt > 0.0 && std::isfinite(frame_dt), "frame_dt must be > 0");
+  const int n = std::min(substeps > 0 ? substeps : automatic_substeps(frame_dt), settings_.max_substeps);
+  const double dt = frame_dt / n;
+  for (int k = 0; k < n && stats_.finite; ++k) {
+    step(dt);
+    // a NaN is caught at once and reported, never stepped on
+    if (!check_finite()) stats_.finite = false;
+  }
+  {
+    ScopedTimer timer(profile_.statistics);
+    gather_statistics();
+  }
+  return n;
+}
+
+void World::step(double dt) {
+  dt_ = dt;
+  { ScopedTimer timer(profile_.broad_phase); broad_phase(dt); }
+  { ScopedTimer timer(profile_.collisions); resolve_collisions(dt); }
+  { ScopedTimer timer(profile_.velocities); update_velocities(dt); }
+  { ScopedTimer timer(profile_.contacts); resolve_contacts(dt); }
+  { ScopedTimer timer(profile_.positions); update_positions(dt); }
+  ++stats_.substeps;
+}
+
+bool World::check_finite() const {
+  for (const RigidBodyState& s : states_) {
+    if (!(s.x.allFinite() && s.v.allFinite() && s.l.allFinite() && s.q.coeffs().allFinite())) return false;
+  }
+  return true;
+}
+
+void World::gather_statistics() {
+  double kinetic = 0.0, potential = 0.0;
+  for (int i = 0; i < body_count(); ++i) {
+    if (defs_[i].kinematic) continue;
+    kinetic += kinetic_energy(defs_[i], states_[i]);
+    potential -= settings_.gravity.dot(states_[i].x) / defs_[i].inverse_mass;
+  }
+  stats_.kinetic_energy = kinetic;
+  stats_.potential_energy = potential;
+  stats_.max_penetration = max_penetration();
+}
+
+double World::max_penetration() const {
+  double deepest = 0.0;
+  for (int a = 0; a < body_count(); ++a) {
+    const Pose pose_a = mesh_pose(defs_[a], states_[a]);
+    const Points& samples = defs_[a].samples;
+    for (int b = kGround; b < body_count(); ++b) {
+      if (b == a || (b == kGround && !ground_)) continue;
+      if (b != kGround && defs_[a].kinematic && defs_[b].kinematic) continue;
+      const Pose pose_b = b == kGround ? Pose() : mesh_pose(defs_[b], states_[b]);
+      for (Eigen::Index s = 0; s < samples.rows(); ++s) {
+        const Vec3 x = pose_a.apply(samples.row(s).transpose());
+        const double phi = b == kGround ? x.y() - ground_->height
+                                        : defs_[b].shape->phi(pose_b.apply_inverse(x));
+        deepest = std::max(deepest, -phi);
+      }
+    }
+  }
+  return deepest;
+}
+
+}  // namespace simbake

@@ -1,0 +1,167 @@
+// The world: rigid bodies on an optional ground plane, stepped frame by frame.
+//
+// World::step(dt) is the scheme of Guendelman, Bridson and Fedkiw (2003), as the seed notes
+// teach it, as a list of named stages (see step() in world.cpp):
+//   broad_phase        pairs whose bounding boxes over the step overlap (and ground pairs)
+//   resolve_collisions elastic impulses with restitution at the deepest non-separating
+//                      point, from start-of-step velocities, candidates advanced with forces
+//   update_velocities  gravity
+//   resolve_contacts   inelastic impulses at every penetrating point, with average
+//                      velocities defined exactly as update_positions moves the bodies; each
+//                      point's total impulse over the stage obeys the Coulomb cone
+//   update_positions   x += dt v; q by the torque-free rotation with L fixed
+// Statistics (energy, penetration, substeps) are gathered once per frame.
+#pragma once
+
+#include "geometry/mass_properties.h"
+#include "rigid/rigid_body.h"
+
+#include <cstdint>
+#include <optional>
+#include <unordered_set>
+#include <vector>
+
+namespace simbake {
+
+struct WorldSettings {
+  Vec3 gravity = Vec3(0.0, -9.81, 0.0);  // (m/s^2)
+  int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
+  int contact_sweeps = 20;               // inelastic sweeps over all pairs (at most)
+  double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
+                                         // changes a point velocity by more than this
+  double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
+  double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
+                                         // more than this fraction of its thickness
+  int max_substeps = 4096;               // per frame, automatic or not
+};
+
+struct GroundDef {
+  double height = 0.0;       // plane y = height (m)
+  double friction = 0.5;
+  double restitution = 0.0;
+};
+
+// Creation settings of one body; the world turns them into a RigidBodyDef and a state
+struct BodyDesc {
+  SignedDistancePtr shape;          // in mesh coordinates
+  Points samples;                   // (s x 3) surface samples, mesh coordinates (m)
+  MassProperties unit_mass;         // of the shape at density 1, mesh coordinates
+  double mass = 1.0;                // (kg); ignored for kinematic bodies
+  Vec3 origin = Vec3::Zero();       // world position of the mesh origin (m)
+  Quat orientation = Quat::Identity();  // mesh orientation in world
+  Vec3 linear_velocity = Vec3::Zero();  // of the centre of mass (m/s)
+  Vec3 angular_velocity = Vec3::Zero(); // world (rad/s)
+  double friction = 0.5;
+  double restitution = 0.0;
+  bool kinematic = false;
+};
+
+struct StepStatistics {
+  long long substeps = 0;          // substeps taken since the world was built
+  double max_penetration = 0.0;    // deepest sample inside another body or the ground (m), last frame
+  double kinetic_energy = 0.0;     // (J), now
+  double potential_energy = 0.0;   // gravity, -m g.x (J), now
+  long long impulses = 0;          // collision and contact impulses applied, in total
+  bool finite = true;              // false once any state went NaN or infinite
+};
+
+// Wall seconds spent in each stage since the world was built
+struct StageProfile {
+  double broad_phase = 0.0;
+  double collisions = 0.0;
+  double velocities = 0.0;
+  double contacts = 0.0;
+  double positions = 0.0;
+  double statistics = 0.0;
+};
+
+class World {
+ public:
+  explicit World(const WorldSettings& settings = WorldSettings());
+
+  void set_ground(const GroundDef& ground);
+  // Validates and adds a body; returns its index (bodies are addressed by index)
+  int add_body(const BodyDesc& desc);
+
+  // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
+  // substeps == 0; returns the number of substeps taken
+  int step_frame(double frame_dt, int substeps = 0);
+  // One substep: the stages in order
+  void step(double dt);
+  // Substeps the automatic rule picks for the next frame
+  int automatic_substeps(double frame_dt) const;
+
+  int body_count() const { return static_cast<int>(defs_.size()); }
+  const RigidBodyDef& body_def(int i) const { return defs_[i]; }
+  const RigidBodyState& body_state(int i) const { return states_[i]; }
+  RigidBodyState& body_state(int i) { return states_[i]; }
+  Pose body_mesh_pose(int i) const { return mesh_pose(defs_[i], states_[i]); }
+  const WorldSettings& settings() const { return settings_; }
+  const StepStatistics& statistics() const { return stats_; }
+  const StageProfile& profile() const { return profile_; }
+  // Deepest penetration of any sample into another body or the ground, now (m, >= 0)
+  double max_penetration() const;
+
+ private:
+  static constexpr int kGround = -1;
+
+  // A sample point of body `a` found inside body `b` (or the ground) at the candidates
+  struct Penetration {
+    int a, b;
+    Vec3 x;      // world position of the sample (m)
+    Vec3 n;      // unit normal of b's level set at x, world, pointing towards a
+    double phi;  // b's signed distance at x (m), negative
+    int sample;  // index of the sample in a's samples
+  };
+  // A contact of the contact stage: once found it stays for the whole stage
+  struct ContactPoint {
+    Penetration point;
+    double friction;
+    Vec3 total = Vec3::Zero();  // impulse given to body a so far this stage (N s)
+  };
+  struct BodyPair {
+    int a, b;  // b may be kGround
+    double friction, restitution;  // combined (see combine_materials in world.cpp)
+  };
+  enum class Velocities { kStartOfStep, kAverage };
+
+  // stages
+  void broad_phase(double dt);
+  void resolve_collisions(double dt);
+  void update_velocities(double dt);
+  void resolve_contacts(double dt);
+  void update_positions(double dt);
+  void gather_statistics();
+
+  // helpers of the stages
+  void update_candidate(int i);
+  void update_all_candidates(double dt, bool with_forces);
+  Vec3 point_velocity(int i, const Vec3& x, Velocities mode) const;
+  void find_penetrations(int a, int b, Velocities mode, bool only_approaching,
+                         std::vector<Penetration>& out) const;
+  Mat3 pair_impulse_matrix(const Penetration& p) const;
+  void exchange_impulse(const Penetration& p, const Vec3& J);
+  bool apply_impulse(const Penetration& p, double restitution, double friction, Velocities mode);
+  void find_new_contacts();
+  void refresh_contact(Penetration& p) const;
+  bool apply_contact_impulse(ContactPoint& contact);
+  bool check_finite() const;
+
+  WorldSettings settings_;
+  std::optional<GroundDef> ground_;
+  std::vector<RigidBodyDef> defs_;          // (nbody) constant descriptions
+  std::vector<RigidBodyState> states_;      // (nbody) state at the start of the step
+  std::vector<Vec3> spin_;                  // (nbody) prescribed angular velocity of kinematic bodies (rad/s)
+  std::vector<RigidBodyState> candidates_;  // (nbody) candidate end-of-step states
+  std::vector<Pose> candidate_poses_;       // (nbody) mesh poses of the candidates
+  std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
+  std::vector<Penetration> scratch_;        // reused by the impulse stages
+  std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
+  std::unordered_set<std::uint64_t> contact_keys_;  // (a, b, sample) of contacts_
+  double dt_ = 0.0;                         // current substep (s)
+  bool candidates_with_forces_ = false;
+  StepStatistics stats_;
+  StageProfile profile_;
+};
+
+}  // namespace simbake

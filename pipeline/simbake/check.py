@@ -1,0 +1,268 @@
+"""Validate a USD cache: OpenUSD's validators plus simbake's own cache-v1 rules.
+
+``check_cache(path)`` returns a list of one-line problems (empty when the cache is fine):
+
+* OpenUSD's validation framework: every registered validator
+  (``ValidationRegistry().GetOrLoadAllValidators()``) is run on the stage. Errors *and*
+  warnings are reported (``usd error: ...`` / ``usd warning: ...``): warnings flag things that
+  break in some consumers, a cache written by :class:`simbake.usd_writer.CacheWriter` has
+  none, so a warning on a simbake cache is worth a look. Pass ``warnings=False`` to keep
+  only errors. Info-level findings are never reported.
+* Our rules (DESIGN.md, "USD cache, version 1"):
+  - the file exists and opens as a USD stage;
+  - stage metadata: ``defaultPrim = "World"`` naming an existing prim, ``upAxis = "Y"``,
+    ``metersPerUnit = 1``, ``kilogramsPerUnit = 1``, ``timeCodesPerSecond`` and
+    ``framesPerSecond`` both authored and equal, integral ``startTimeCode <= endTimeCode``;
+  - every time-sampled attribute has exactly one sample per integer frame from start to end;
+  - no NaN or inf in any default or sampled value of a floating-point attribute (points,
+    normals, velocities, extent, xformOp:translate, xformOp:orient, ...);
+  - every point-based prim has an ``extent`` that contains its points at every frame;
+  - every ``xformOp:orient`` quaternion has unit length (within 1e-5).
+
+Problems repeated over many frames are reported once per attribute (count and first frame).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+__all__ = ["check_cache", "UNIT_QUAT_TOL"]
+
+UNIT_QUAT_TOL = 1e-5
+_EXTENT_RTOL = 1e-6
+
+
+def check_cache(path: str | Path, *, warnings: bool = True) -> list[str]:
+    """Return every problem found in the USD cache at ``path``; empty if it is fine."""
+    from pxr import Sdf, Usd, UsdGeom, UsdPhysics, UsdValidation  # noqa: F401  (lazy: slow import)
+
+    path = Path(path)
+    if not path.is_file():
+        return [f"{path}: no such file" if not path.exists() else f"{path}: not a file"]
+    try:
+        stage = _open_fresh(path)
+    except Exception as exc:  # Tf.ErrorException and friends
+        return [f"{path}: cannot open as USD: {_one_line(str(exc))}"]
+    if stage is None:
+        return [f"{path}: cannot open as USD"]
+
+    problems: list[str] = []
+    problems += _validators(stage, path, warnings)
+    start, end = _metadata(stage, path, problems)
+    frames = None
+    if start is not None and end is not None:
+        frames = np.arange(int(start), int(end) + 1, dtype=np.float64)
+    for prim in stage.TraverseAll():
+        for attr in prim.GetAttributes():
+            if attr.HasAuthoredValue() or attr.GetNumTimeSamples():
+                _check_attribute(attr, frames, path, problems)
+        if prim.IsA(UsdGeom.PointBased):
+            _check_extent(UsdGeom.PointBased(prim), path, problems)
+    return problems
+
+
+# --------------------------------------------------------------------------------------------
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _open_fresh(path: Path):
+    """Open ``path`` as it is on disk now, even if someone in this process holds the layer."""
+    from pxr import Sdf, Usd
+
+    layer = Sdf.Layer.Find(str(path))
+    if layer is not None:
+        if layer.dirty:  # unsaved edits of someone else's: leave them alone, read a copy
+            layer = Sdf.Layer.OpenAsAnonymous(str(path))
+        else:
+            layer.Reload(force=True)
+    else:
+        layer = Sdf.Layer.FindOrOpen(str(path))
+    if layer is None:
+        return None
+    return Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+
+
+def _validators(stage, path: Path, warnings: bool) -> list[str]:
+    from pxr import UsdValidation
+
+    kinds = {UsdValidation.ValidationErrorType.Error: "error"}
+    if warnings:
+        kinds[UsdValidation.ValidationErrorType.Warn] = "warning"
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    out = []
+    for err in UsdValidation.ValidationContext(validators).Validate(stage):
+        kind = kinds.get(err.GetType())
+        if kind is None:
+            continue
+        sites = []
+        for site in err.GetSites():
+            if site.IsProperty():
+                sites.append(str(site.GetProperty().GetPath()))
+            elif site.IsPrim():
+                sites.append(str(site.GetPrim().GetPath()))
+        where = f" at {', '.join(sites)}" if sites and sites != ["/"] else ""
+        out.append(f"{path}: usd {kind}: {err.GetIdentifier()}{where}: "
+                   f"{_one_line(err.GetMessage())}")
+    return out
+
+
+def _metadata(stage, path: Path, problems: list[str]) -> tuple[float | None, float | None]:
+    from pxr import UsdGeom, UsdPhysics
+
+    layer = stage.GetRootLayer()
+    dp = stage.GetDefaultPrim()
+    if not layer.HasDefaultPrim() or layer.defaultPrim != "World":
+        problems.append(f"{path}: defaultPrim must be \"World\", got "
+                        f"{layer.defaultPrim if layer.HasDefaultPrim() else 'none'!r}")
+    elif not dp:
+        problems.append(f"{path}: defaultPrim \"World\" names no prim")
+    if not stage.HasAuthoredMetadata("upAxis") or UsdGeom.GetStageUpAxis(stage) != "Y":
+        problems.append(f"{path}: upAxis must be \"Y\"")
+    if (not stage.HasAuthoredMetadata("metersPerUnit")
+            or UsdGeom.GetStageMetersPerUnit(stage) != 1.0):
+        problems.append(f"{path}: metersPerUnit must be 1")
+    if (not UsdPhysics.StageHasAuthoredKilogramsPerUnit(stage)
+            or UsdPhysics.GetStageKilogramsPerUnit(stage) != 1.0):
+        problems.append(f"{path}: kilogramsPerUnit must be 1")
+    if not layer.HasTimeCodesPerSecond():
+        problems.append(f"{path}: timeCodesPerSecond is not set")
+    if not layer.HasFramesPerSecond():
+        problems.append(f"{path}: framesPerSecond is not set")
+    if (layer.HasTimeCodesPerSecond() and layer.HasFramesPerSecond()
+            and layer.timeCodesPerSecond != layer.framesPerSecond):
+        problems.append(f"{path}: timeCodesPerSecond {layer.timeCodesPerSecond:g} differs from "
+                        f"framesPerSecond {layer.framesPerSecond:g}")
+    start = layer.startTimeCode if layer.HasStartTimeCode() else None
+    end = layer.endTimeCode if layer.HasEndTimeCode() else None
+    for name, value in (("startTimeCode", start), ("endTimeCode", end)):
+        if value is None:
+            problems.append(f"{path}: {name} is not set")
+        elif not (math.isfinite(value) and value == int(value)):
+            problems.append(f"{path}: {name} must be a whole frame, got {value}")
+    if start is None or end is None or start != int(start) or end != int(end):
+        return None, None
+    if end < start:
+        problems.append(f"{path}: endTimeCode {end:g} is before startTimeCode {start:g}")
+        return None, None
+    return start, end
+
+
+def _floats(value: Any) -> np.ndarray | None:
+    """The floating-point numbers in a USD value, or None if it holds none."""
+    from pxr import Gf
+
+    if value is None or isinstance(value, (bool, int, str)):
+        return None
+    if isinstance(value, float):
+        return np.array([value])
+    if isinstance(value, (Gf.Quatd, Gf.Quatf, Gf.Quath)):
+        return _quat(value)
+    try:
+        arr = np.asarray(value)
+    except Exception:
+        return None
+    if arr.dtype.kind == "f":
+        return arr
+    if arr.dtype == object and arr.size:  # e.g. arrays of quaternions
+        try:
+            return np.array([_quat(q) for q in value], dtype=np.float64)
+        except Exception:
+            return None
+    return None
+
+
+def _quat(q) -> np.ndarray:
+    im = q.GetImaginary()
+    return np.array([q.GetReal(), im[0], im[1], im[2]], dtype=np.float64)
+
+
+def _report(problems, path, attr, what, bad_times: list, total: int) -> None:
+    if not bad_times:
+        return
+    t0 = bad_times[0]
+    when = "default value" if t0 is None else f"frame {t0:g}"
+    more = f" ({len(bad_times)} of {total} values)" if total > 1 else ""
+    problems.append(f"{path}: {attr.GetPath()}: {what} at {when}{more}")
+
+
+def _check_attribute(attr, frames: np.ndarray | None, path: Path, problems: list[str]) -> None:
+    from pxr import Usd
+
+    times = attr.GetTimeSamples()
+    if times and frames is not None:
+        t = np.asarray(times, dtype=np.float64)
+        missing = np.setdiff1d(frames, t)
+        extra = np.setdiff1d(t, frames)
+        if missing.size:
+            problems.append(f"{path}: {attr.GetPath()}: {missing.size} frame(s) without a time "
+                            f"sample, first {missing[0]:g}")
+        if extra.size:
+            problems.append(f"{path}: {attr.GetPath()}: {extra.size} time sample(s) outside the "
+                            f"whole frames {frames[0]:g}..{frames[-1]:g}, first {extra[0]:g}")
+
+    is_orient = attr.GetName().startswith("xformOp:orient")
+    codes: Iterable = ([None] if attr.HasAuthoredValue() and _has_default(attr) else []) + list(times)
+    nonfinite, nonunit, total = [], [], 0
+    for t in codes:
+        value = attr.Get(Usd.TimeCode.Default() if t is None else Usd.TimeCode(t))
+        arr = _floats(value)
+        if arr is None:
+            continue
+        total += 1
+        if not np.isfinite(arr).all():
+            nonfinite.append(t)
+            continue
+        if is_orient and arr.size == 4 and abs(np.linalg.norm(arr) - 1.0) > UNIT_QUAT_TOL:
+            nonunit.append(t)
+    _report(problems, path, attr, "NaN or inf", nonfinite, total)
+    _report(problems, path, attr, f"quaternion length differs from 1 by more than "
+                                  f"{UNIT_QUAT_TOL:g}", nonunit, total)
+
+
+def _has_default(attr) -> bool:
+    for spec in attr.GetPropertyStack():
+        if spec.HasDefaultValue():
+            return True
+    return False
+
+
+def _check_extent(geom, path: Path, problems: list[str]) -> None:
+    from pxr import Usd
+
+    points, extent = geom.GetPointsAttr(), geom.GetExtentAttr()
+    if not points.HasAuthoredValue():
+        return
+    if not extent.HasAuthoredValue():
+        problems.append(f"{path}: {geom.GetPath()}: points without an authored extent")
+        return
+    pt, et = set(points.GetTimeSamples()), set(extent.GetTimeSamples())
+    # both sampled: compare where both are (a missing sample is reported once, elsewhere)
+    times = sorted(pt & et if pt and et else pt | et)
+    codes = [Usd.TimeCode(t) for t in times] or [Usd.TimeCode.Default()]
+    bad = []
+    for code in codes:
+        p, e = points.Get(code), extent.Get(code)
+        if p is None or len(p) == 0:
+            continue
+        p = np.asarray(p, dtype=np.float64)
+        e = np.asarray(e, dtype=np.float64) if e is not None else np.empty((0, 3))
+        if e.shape != (2, 3):
+            bad.append(code)
+            continue
+        if not (np.isfinite(p).all() and np.isfinite(e).all()):
+            continue  # reported as NaN/inf already
+        tol = _EXTENT_RTOL * max(1.0, float(np.abs(p).max()))
+        if (p < e[0] - tol).any() or (p > e[1] + tol).any():
+            bad.append(code)
+    if bad:
+        c = bad[0]
+        when = "default value" if c.IsDefault() else f"frame {c.GetValue():g}"
+        more = f" ({len(bad)} of {len(codes)} values)" if len(codes) > 1 else ""
+        problems.append(f"{path}: {geom.GetPath()}: extent does not contain the points at "
+                        f"{when}{more}")

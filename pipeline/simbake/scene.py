@@ -1,0 +1,592 @@
+"""Scene files: load and validate a simbake scene description (TOML, version 1).
+
+A scene file describes one bake. Units are SI (metres, kilograms, seconds, radians),
+Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene file::
+
+    [scene]     fps = 24, start_frame = 1, end_frame = 120 (required), gravity = [0, -9.81, 0]
+    [solver]    substeps = 0                      (0: automatic)
+    [ground]    height, friction, restitution     (an infinite plane y = height; absent: none)
+    [[bodies]]  name (required), mesh = "file.obj"  or  shape = { type = "sphere", radius = r }
+                | { type = "box", size = [x, y, z] }, density or mass, position, orientation,
+                linear_velocity, angular_velocity, friction, restitution, kinematic, voxel_size
+    [[cloths]]  name (required), grid = { size = [w, d], resolution = [nx, nz] } or mesh = "...",
+                position, orientation, area_density, stretch_stiffness, bend_stiffness,
+                damping, strain_limit, compression, friction, thickness, pinned
+
+The full reference, with defaults, is the section "Scene file (TOML), version 1" of
+DESIGN.md; the defaults here are the dataclass defaults below.
+
+:func:`load_scene` checks everything that can be checked without reading a mesh: unknown
+keys at every level, types, ranges, NaN and infinity, vector lengths, names (valid USD
+prim names, unique across bodies and cloths, never ``World``), references (mesh files
+must exist and be files). Loading the meshes themselves is ``assets.py``'s job. Type
+rules: a boolean is not a number; an integer is accepted where a float is expected, a
+float is never accepted where an integer is required.
+
+Every problem raises :class:`~simbake.errors.SceneError` whose one-line message names the
+file (as the user gave it), the key path and the problem, e.g.
+``demo.toml: bodies[2].shape.radius: must be > 0, got -1.0``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Optional
+
+from .errors import SceneError
+
+__all__ = ["Shape", "Ground", "Body", "Cloth", "Scene", "load_scene"]
+
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+
+ZERO3: Vec3 = (0.0, 0.0, 0.0)
+IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
+DEFAULT_DENSITY = 1000.0  # kg/m^3, used when a body gives neither density nor mass
+SHAPE_TYPES = ("sphere", "box")
+COMPRESSION_MODES = ("subgrid", "enforce", "none")
+RESERVED_NAMES = ("World",)  # the root prim of every cache
+_PRIM_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+# --------------------------------------------------------------------------------------
+# The validated scene
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Shape:
+    """What a body is made of: an analytic primitive or a mesh file."""
+
+    kind: str  # "sphere" | "box" | "mesh"
+    radius: float = 0.0  # sphere
+    size: Vec3 = ZERO3  # box: full edge lengths
+    mesh_path: Path | None = None  # mesh: absolute path
+
+
+@dataclass(frozen=True)
+class Ground:
+    """The infinite plane y = height."""
+
+    height: float = 0.0
+    friction: float = 0.5
+    restitution: float = 0.0
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body. Exactly one of ``density`` / ``mass`` is set."""
+
+    name: str
+    shape: Shape
+    density: float | None
+    mass: float | None
+    position: Vec3
+    orientation: Quat  # (w, x, y, z), unit length
+    linear_velocity: Vec3
+    angular_velocity: Vec3  # world frame, rad/s
+    friction: float = 0.5
+    restitution: float = 0.0
+    kinematic: bool = False
+    voxel_size: float = 0.0  # 0: automatic
+
+
+@dataclass(frozen=True)
+class Cloth:
+    """A cloth sheet: a regular grid in the XZ plane or a mesh file."""
+
+    name: str
+    grid_size: Vec2 | None
+    grid_resolution: tuple[int, int] | None  # vertices along x and z
+    mesh_path: Path | None
+    position: Vec3
+    orientation: Quat
+    area_density: float = 0.1
+    stretch_stiffness: float = 1000.0
+    bend_stiffness: float = 1e-4
+    damping: float = 0.01
+    strain_limit: float = 0.1
+    compression: str = "subgrid"
+    friction: float = 0.3
+    thickness: float = 0.005
+    pinned: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """A validated scene. Keyword-only because ``end_frame`` is required but follows defaults."""
+
+    path: Path  # the scene file: absolute, its directory resolved
+    fps: float = 24.0
+    start_frame: int = 1
+    end_frame: int
+    gravity: Vec3 = (0.0, -9.81, 0.0)
+    substeps: int = 0  # per frame; 0: automatic
+    ground: Ground | None = None
+    bodies: tuple[Body, ...] = ()
+    cloths: tuple[Cloth, ...] = ()
+
+    @property
+    def frame_count(self) -> int:
+        """Number of written frames, start and end inclusive."""
+        return self.end_frame - self.start_frame + 1
+
+    def hash(self) -> str:
+        """SHA-256 (hex) over the scene file and every mesh file it references.
+
+        Files are read now, in a fixed order: the scene file, then the meshes in order of
+        first reference (bodies, then cloths), each once. Each file contributes its own
+        SHA-256 digest, so file boundaries cannot be confused.
+        """
+        digest = hashlib.sha256()
+        for path in (self.path, *self._mesh_paths()):
+            digest.update(_file_digest(path))
+        return digest.hexdigest()
+
+    def _mesh_paths(self) -> tuple[Path, ...]:
+        paths = [b.shape.mesh_path for b in self.bodies] + [c.mesh_path for c in self.cloths]
+        return tuple(dict.fromkeys(p for p in paths if p is not None))
+
+
+def _file_digest(path: Path) -> bytes:
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            while chunk := f.read(1 << 20):
+                digest.update(chunk)
+    except OSError as exc:
+        raise _error(path, "", f"cannot read for hashing: {exc.strerror or exc}") from None
+    return digest.digest()
+
+
+# --------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------
+
+_TOP_KEYS = ("scene", "solver", "ground", "bodies", "cloths")
+_SCENE_KEYS = ("fps", "start_frame", "end_frame", "gravity")
+_SOLVER_KEYS = ("substeps",)
+_GROUND_KEYS = ("height", "friction", "restitution")
+_BODY_KEYS = (
+    "name", "mesh", "shape", "density", "mass", "position", "orientation",
+    "linear_velocity", "angular_velocity", "friction", "restitution", "kinematic",
+    "voxel_size",
+)  # fmt: skip
+_SHAPE_KEYS = {"sphere": ("type", "radius"), "box": ("type", "size")}
+_ANY_SHAPE_KEYS = ("type", "radius", "size")
+_CLOTH_KEYS = (
+    "name", "grid", "mesh", "position", "orientation", "area_density",
+    "stretch_stiffness", "bend_stiffness", "damping", "strain_limit", "compression",
+    "friction", "thickness", "pinned",
+)  # fmt: skip
+_GRID_KEYS = ("size", "resolution")
+
+
+def load_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read and validate a scene file; raise :class:`SceneError` on any problem."""
+    file = os.fspath(path)  # named in messages exactly as the user gave it
+    # Canonical directory (no "..", as the OS would walk it), but the file's own name is
+    # kept, so a symlinked scene file finds meshes beside the link, as USD layers do.
+    given = Path(file).absolute()
+    base_dir = given.parent.resolve()
+    scene_path = base_dir / given.name
+    root = _Table(file, "", _read_toml(file, scene_path), _TOP_KEYS)
+
+    settings = root.subtable("scene", _SCENE_KEYS, required=True)
+    start_frame = settings.integer("start_frame", Scene.start_frame)
+    end_frame = settings.integer("end_frame", check=_at_least(start_frame, "start_frame"))
+    solver = root.subtable("solver", _SOLVER_KEYS)
+
+    bodies = tuple(_body(t, base_dir) for t in root.tables("bodies", _BODY_KEYS))
+    cloths = tuple(_cloth(t, base_dir) for t in root.tables("cloths", _CLOTH_KEYS))
+    _check_unique_names(file, bodies, cloths)
+
+    return Scene(
+        path=scene_path,
+        fps=settings.number("fps", Scene.fps, _greater(0)),
+        start_frame=start_frame,
+        end_frame=end_frame,
+        gravity=settings.vector("gravity", 3, Scene.gravity),
+        substeps=solver.integer("substeps", Scene.substeps, _at_least(0)),
+        ground=_ground(root.subtable("ground", _GROUND_KEYS)) if root.has("ground") else None,
+        bodies=bodies,
+        cloths=cloths,
+    )
+
+
+def _read_toml(file: str, path: Path) -> dict[str, Any]:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise _error(file, "", "file not found") from None
+    except IsADirectoryError:
+        raise _error(file, "", "is a directory, not a scene file") from None
+    except PermissionError:
+        raise _error(file, "", "cannot read: permission denied") from None
+    except (OSError, ValueError) as exc:
+        raise _error(file, "", f"cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise _error(file, "", f"invalid TOML: not UTF-8 text (byte offset {exc.start})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise _error(file, "", f"invalid TOML: {exc}") from None
+
+
+def _ground(t: _Table) -> Ground:
+    return Ground(
+        height=t.number("height", Ground.height),
+        friction=t.number("friction", Ground.friction, _at_least(0)),
+        restitution=t.number("restitution", Ground.restitution, _within(0, 1)),
+    )
+
+
+def _body(t: _Table, base_dir: Path) -> Body:
+    name = t.string("name", check=_prim_name)
+    shape = _body_shape(t, base_dir)
+    density = t.number("density", None, _greater(0))
+    mass = t.number("mass", None, _greater(0))
+    if density is not None and mass is not None:
+        raise t.error("mass", "cannot be given together with density; give one of them")
+    if density is None and mass is None:
+        density = DEFAULT_DENSITY
+    return Body(
+        name=name,
+        shape=shape,
+        density=density,
+        mass=mass,
+        position=t.vector("position", 3, ZERO3),
+        orientation=_orientation(t),
+        linear_velocity=t.vector("linear_velocity", 3, ZERO3),
+        angular_velocity=t.vector("angular_velocity", 3, ZERO3),
+        friction=t.number("friction", Body.friction, _at_least(0)),
+        restitution=t.number("restitution", Body.restitution, _within(0, 1)),
+        kinematic=t.boolean("kinematic", Body.kinematic),
+        voxel_size=t.number("voxel_size", Body.voxel_size, _at_least(0)),
+    )
+
+
+def _body_shape(t: _Table, base_dir: Path) -> Shape:
+    if t.has("mesh") and t.has("shape"):
+        raise t.error("shape", "cannot be given together with mesh; give one of them")
+    if t.has("mesh"):
+        return Shape(kind="mesh", mesh_path=_mesh_file(t, "mesh", base_dir))
+    if not t.has("shape"):
+        raise t.error(None, 'needs either mesh = "FILE" or shape = { type = ... }')
+    shape = t.subtable("shape", _ANY_SHAPE_KEYS)
+    kind = shape.string("type", check=_one_of(SHAPE_TYPES))
+    shape.only(_SHAPE_KEYS[kind], f"a {kind} shape")
+    if kind == "sphere":
+        return Shape(kind=kind, radius=shape.number("radius", check=_greater(0)))
+    return Shape(kind=kind, size=shape.vector("size", 3, check=_greater(0)))
+
+
+def _cloth(t: _Table, base_dir: Path) -> Cloth:
+    name = t.string("name", check=_prim_name)
+    if t.has("grid") and t.has("mesh"):
+        raise t.error("mesh", "cannot be given together with grid; give one of them")
+    if not (t.has("grid") or t.has("mesh")):
+        raise t.error(None, 'needs either grid = { size, resolution } or mesh = "FILE"')
+    grid_size = grid_resolution = mesh_path = None
+    if t.has("grid"):
+        grid = t.subtable("grid", _GRID_KEYS)
+        grid_size = grid.vector("size", 2, check=_greater(0))
+        grid_resolution = grid.integers("resolution", 2, check=_at_least(2))
+    else:
+        mesh_path = _mesh_file(t, "mesh", base_dir)
+    return Cloth(
+        name=name,
+        grid_size=grid_size,
+        grid_resolution=grid_resolution,
+        mesh_path=mesh_path,
+        position=t.vector("position", 3, ZERO3),
+        orientation=_orientation(t),
+        area_density=t.number("area_density", Cloth.area_density, _greater(0)),
+        stretch_stiffness=t.number("stretch_stiffness", Cloth.stretch_stiffness, _at_least(0)),
+        bend_stiffness=t.number("bend_stiffness", Cloth.bend_stiffness, _at_least(0)),
+        damping=t.number("damping", Cloth.damping, _at_least(0)),
+        strain_limit=t.number("strain_limit", Cloth.strain_limit, _at_least(0)),
+        compression=t.string("compression", Cloth.compression, _one_of(COMPRESSION_MODES)),
+        friction=t.number("friction", Cloth.friction, _at_least(0)),
+        thickness=t.number("thickness", Cloth.thickness, _at_least(0)),
+        pinned=t.integers("pinned", None, Cloth.pinned, _vertex_index(grid_resolution)),
+    )
+
+
+def _orientation(t: _Table) -> Quat:
+    """The ``orientation`` quaternion, normalized; a zero quaternion is an error."""
+    q = t.vector("orientation", 4, IDENTITY)
+    scale = max(abs(c) for c in q)  # scale first so huge or tiny values cannot overflow
+    if scale == 0.0:
+        raise t.error("orientation", "must be a non-zero quaternion [w, x, y, z], got all zeros")
+    q = tuple(c / scale for c in q)
+    norm = math.hypot(*q)
+    return tuple(c / norm for c in q)  # type: ignore[return-value]
+
+
+def _mesh_file(t: _Table, name: str, base_dir: Path) -> Path:
+    """The mesh file at key ``name``, resolved against the scene's directory; must exist."""
+    text = t.string(name, check=_non_empty)
+    try:
+        path = (base_dir / text).resolve()
+        exists, is_file = path.exists(), path.is_file()
+    except (OSError, ValueError) as exc:
+        raise t.error(name, f"cannot access mesh file {text!r}: {exc}") from None
+    if not exists:
+        raise t.error(name, f"mesh file not found: {path}")
+    if not is_file:
+        raise t.error(name, f"mesh path is not a file: {path}")
+    if not os.access(path, os.R_OK):
+        raise t.error(name, f"mesh file is not readable: {path}")
+    return path
+
+
+def _check_unique_names(file: str, bodies: Iterable[Body], cloths: Iterable[Cloth]) -> None:
+    """Names become prim paths ``/World/<name>``, so they share one namespace."""
+    seen: dict[str, str] = {}
+    owners = [(f"bodies[{i}]", b.name) for i, b in enumerate(bodies)]
+    owners += [(f"cloths[{i}]", c.name) for i, c in enumerate(cloths)]
+    for owner, name in owners:
+        if name in seen:
+            raise _error(file, f"{owner}.name", f"duplicate name {name!r} (also {seen[name]})")
+        seen[name] = owner
+
+
+# --------------------------------------------------------------------------------------
+# Reading typed values at key paths
+# --------------------------------------------------------------------------------------
+
+_REQUIRED: Any = object()  # default meaning "the key must be present"
+
+Check = Callable[[Any], Optional[str]]  # a value -> a problem, or None when fine
+
+
+class _Table:
+    """A TOML table at a key path (``bodies[2].shape``) that allows only some keys.
+
+    The typed readers (``number``, ``integer``, ``vector``, ...) return the value at a key
+    converted and checked, or ``default`` when the key is absent; without a default the
+    key is required.
+    """
+
+    def __init__(self, file: str, key: str, data: Any, allowed: Iterable[str]):
+        self.file, self.key = file, key
+        if not isinstance(data, dict):
+            raise _error(file, key, f"must be a table, got {_describe(data)}")
+        self.data: dict[str, Any] = data
+        self.only(allowed)
+
+    def only(self, allowed: Iterable[str], what: str = "") -> None:
+        """Reject any key not in ``allowed``; ``what`` qualifies the message."""
+        allowed = tuple(allowed)
+        for name in self.data:
+            if name not in allowed:
+                where = f" for {what}" if what else ""
+                listed = ", ".join(allowed)
+                raise self.error(name, f"unknown key{where} (allowed: {listed})")
+
+    def path(self, name: str | None) -> str:
+        if name is None:
+            return self.key
+        return f"{self.key}.{name}" if self.key else name
+
+    def error(self, name: str | None, problem: str) -> SceneError:
+        return _error(self.file, self.path(name), problem)
+
+    def has(self, name: str) -> bool:
+        return name in self.data
+
+    def _get(self, name: str, default: Any, convert: Callable[..., Any], *args: Any) -> Any:
+        if name not in self.data:
+            if default is _REQUIRED:
+                raise self.error(name, "missing required key")
+            return default
+        return convert(self.file, self.path(name), self.data[name], *args)
+
+    def number(self, name: str, default: Any = _REQUIRED, check: Check | None = None) -> Any:
+        return self._get(name, default, _as_float, check)
+
+    def integer(self, name: str, default: Any = _REQUIRED, check: Check | None = None) -> Any:
+        return self._get(name, default, _as_int, check)
+
+    def boolean(self, name: str, default: Any = _REQUIRED) -> Any:
+        return self._get(name, default, _as_bool, None)
+
+    def string(self, name: str, default: Any = _REQUIRED, check: Check | None = None) -> Any:
+        return self._get(name, default, _as_str, check)
+
+    def vector(
+        self, name: str, n: int, default: Any = _REQUIRED, check: Check | None = None
+    ) -> Any:
+        """A tuple of exactly ``n`` finite floats."""
+        return self._get(name, default, _as_array, n, "numbers", _as_float, check)
+
+    def integers(
+        self, name: str, n: int | None, default: Any = _REQUIRED, check: Check | None = None
+    ) -> Any:
+        """A tuple of integers, exactly ``n`` of them unless ``n`` is None."""
+        return self._get(name, default, _as_array, n, "integers", _as_int, check)
+
+    def subtable(self, name: str, allowed: Iterable[str], required: bool = False) -> _Table:
+        """The table at ``name``; an empty one when it is absent and not required."""
+        if name not in self.data and required:
+            raise self.error(name, f"missing required table [{self.path(name)}]")
+        return _Table(self.file, self.path(name), self.data.get(name, {}), allowed)
+
+    def tables(self, name: str, allowed: Iterable[str]) -> list[_Table]:
+        """The array of tables ``[[name]]``; empty when absent."""
+        value = self.data.get(name, [])
+        if not isinstance(value, list):
+            problem = f"must be an array of tables ([[{name}]]), got {_describe(value)}"
+            raise self.error(name, problem)
+        key = self.path(name)
+        return [_Table(self.file, f"{key}[{i}]", item, allowed) for i, item in enumerate(value)]
+
+
+def _checked(file: str, key: str, value: Any, check: Check | None) -> Any:
+    problem = check(value) if check else None
+    if problem:
+        raise _error(file, key, problem)
+    return value
+
+
+def _as_float(file: str, key: str, value: Any, check: Check | None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _error(file, key, f"must be a number, got {_describe(value)}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise _error(file, key, f"must be a finite number, got {value!r}")
+    return _checked(file, key, value, check)
+
+
+def _as_int(file: str, key: str, value: Any, check: Check | None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _error(file, key, f"must be an integer, got {_describe(value)}")
+    return _checked(file, key, value, check)
+
+
+def _as_bool(file: str, key: str, value: Any, check: Check | None) -> bool:
+    if not isinstance(value, bool):
+        raise _error(file, key, f"must be true or false, got {_describe(value)}")
+    return _checked(file, key, value, check)
+
+
+def _as_str(file: str, key: str, value: Any, check: Check | None) -> str:
+    if not isinstance(value, str):
+        raise _error(file, key, f"must be a string, got {_describe(value)}")
+    return _checked(file, key, value, check)
+
+
+def _as_array(
+    file: str,
+    key: str,
+    value: Any,
+    length: int | None,
+    noun: str,
+    item: Callable[[str, str, Any, Check | None], Any],
+    check: Check | None,
+) -> tuple[Any, ...]:
+    """An array (of exactly ``length`` elements if given), each converted by ``item``."""
+    if not isinstance(value, list) or (length is not None and len(value) != length):
+        expected = f"an array of {length} {noun}" if length is not None else f"an array of {noun}"
+        if isinstance(value, list):
+            got = f"{len(value)} element" + ("" if len(value) == 1 else "s")
+        else:
+            got = _describe(value)
+        raise _error(file, key, f"must be {expected}, got {got}")
+    return tuple(item(file, f"{key}[{i}]", v, check) for i, v in enumerate(value))
+
+
+# Checks: each returns a problem or None.
+
+
+def _greater(bound: float) -> Check:
+    return lambda v: None if v > bound else f"must be > {bound}, got {v!r}"
+
+
+def _at_least(bound: float, name: str = "") -> Check:
+    shown = f"{name} ({bound})" if name else f"{bound}"
+    return lambda v: None if v >= bound else f"must be >= {shown}, got {v!r}"
+
+
+def _within(lo: float, hi: float) -> Check:
+    return lambda v: None if lo <= v <= hi else f"must be in [{lo}, {hi}], got {v!r}"
+
+
+def _one_of(choices: tuple[str, ...]) -> Check:
+    listed = ", ".join(choices)
+    return lambda v: None if v in choices else f"unknown value {v!r} (expected one of: {listed})"
+
+
+def _non_empty(v: str) -> str | None:
+    return None if v else "must not be empty"
+
+
+def _prim_name(v: str) -> str | None:
+    if not _PRIM_NAME.fullmatch(v):
+        return (
+            f"not a valid USD prim name: {_short(v)!r} (use letters, digits and _, "
+            "not starting with a digit)"
+        )
+    if v in RESERVED_NAMES:
+        return f"the name {v!r} is reserved for the root prim"
+    return None
+
+
+def _vertex_index(resolution: tuple[int, int] | None) -> Check:
+    """Pinned vertex indices: >= 0, and < nx * nz for a grid (a mesh's count is unknown here)."""
+
+    def check(v: int) -> str | None:
+        if v < 0:
+            return f"vertex index must be >= 0, got {v}"
+        if resolution is not None and v >= resolution[0] * resolution[1]:
+            nx, nz = resolution
+            return f"vertex index out of range: the {nx}x{nz} grid has {nx * nz} vertices, got {v}"
+        return None
+
+    return check
+
+
+# Messages.
+
+
+def _error(file: str | Path, key: str, problem: str) -> SceneError:
+    """A SceneError whose message is guaranteed to be one line."""
+    return SceneError(_one_line(str(file)), _one_line(key), _one_line(problem))
+
+
+def _one_line(text: str) -> str:
+    """Escape newlines and other unprintable characters (they can come from user keys)."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
+
+
+def _short(text: str, limit: int = 40) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _describe(value: Any) -> str:
+    """A value as a TOML user would name it: ``integer 3``, ``string 'abc'``, ``table``."""
+    if isinstance(value, bool):
+        return f"boolean {str(value).lower()}"
+    if isinstance(value, int):
+        return f"integer {value}"
+    if isinstance(value, float):
+        return f"float {value!r}"
+    if isinstance(value, str):
+        return f"string {_short(value)!r}"
+    if isinstance(value, list):
+        return "array"
+    if isinstance(value, dict):
+        return "table"
+    return "date/time"  # tomllib's only other value types

@@ -1,0 +1,535 @@
+"""Streaming writer for simbake's USD cache, version 1 (see DESIGN.md, "USD cache, version 1").
+
+Layout of a cache::
+
+    /World                      def Xform, kind = "component" (defaultPrim)
+        /<body>                 def Xform: xformOp:translate (double3), xformOp:orient (quatd),
+                                xformOpOrder; time-sampled every frame for a dynamic body,
+                                default values only for a static one
+            /mesh               def Mesh, static: points, faceVertexCounts, faceVertexIndices,
+                                normals ("vertex"), extent, subdivisionScheme "none"
+        /<cloth>                def Mesh: topology once; points, normals, velocities and
+                                extent time-sampled every frame; subdivisionScheme "none"
+
+Usage::
+
+    with CacheWriter("out.usdc", fps=24, start_frame=1, end_frame=120,
+                     bodies=[BodyPrim(...), ...], provenance={"simbake": "0.1"}) as w:
+        for frame in range(1, 121):
+            w.write_frame(frame, translations, orientations)
+
+How it works, and why:
+
+* Everything is authored with the Sdf-level API (``Sdf.CreatePrimInLayer``,
+  ``Sdf.AttributeSpec``, ``Sdf.Layer.SetTimeSample``) with ``Vt`` arrays made from numpy, one
+  ``Sdf.ChangeBlock`` per frame. That is many times faster than UsdGeom schema calls.
+* The layer lives in a hidden temp file beside the target (same directory, so the final
+  ``os.replace`` is atomic). Every ``flush_every`` frames the layer is saved. ``.usdc`` (crate)
+  saves are incremental: new data is appended to the file and the layer's in-memory values are
+  replaced by lazy references into it, so memory stays bounded however long the bake is.
+* ``.usda`` output is baked exactly the same way into a crate temp file and exported to text
+  once at :meth:`CacheWriter.close` (re-saving a growing text file every few frames would be
+  quadratic and would not bound memory).
+* Output is deterministic: identical calls give byte-identical files (no timestamps, no temp
+  names inside the file, provenance dictionaries are sorted by USD).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import uuid
+import weakref
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
+
+from .errors import SimulationError
+
+__all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS"]
+
+#: target suffix -> file format the layer is saved in
+FORMATS = {".usdc": "usdc", ".usd": "usdc", ".usda": "usda"}
+
+_TN = Sdf.ValueTypeNames
+_TRANSLATE = "xformOp:translate"
+_ORIENT = "xformOp:orient"
+_OP_ORDER = Vt.TokenArray([_TRANSLATE, _ORIENT])
+_STATIC_POSE_ATOL = 1e-7  # a static body whose pose moves more than this is a caller bug
+
+
+# --------------------------------------------------------------------------------------------
+# prim descriptions
+# --------------------------------------------------------------------------------------------
+
+def _check_name(kind: str, name: str) -> None:
+    if not isinstance(name, str) or not Sdf.Path.IsValidIdentifier(name):
+        raise ValueError(f"{kind} name {name!r} is not a valid USD prim name")
+
+
+def _topology(kind: str, name: str, counts: Any, indices: Any) -> tuple[np.ndarray, np.ndarray]:
+    counts = np.ascontiguousarray(counts, dtype=np.int32).reshape(-1)
+    indices = np.ascontiguousarray(indices, dtype=np.int32).reshape(-1)
+    if counts.size and counts.min() < 3:
+        raise ValueError(f"{kind} {name!r}: every face needs at least 3 vertices")
+    if int(counts.sum(dtype=np.int64)) != indices.size:
+        raise ValueError(
+            f"{kind} {name!r}: face_vertex_counts sum to {int(counts.sum())} "
+            f"but there are {indices.size} face_vertex_indices")
+    if indices.size and indices.min() < 0:
+        raise ValueError(f"{kind} {name!r}: negative face vertex index")
+    counts.setflags(write=False)
+    indices.setflags(write=False)
+    return counts, indices
+
+
+def _vec3(kind: str, name: str, field: str, value: Any, n: int | None = None) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3 or (n is not None and arr.shape[0] != n):
+        want = f"({n}, 3)" if n is not None else "(n, 3)"
+        raise ValueError(f"{kind} {name!r}: {field} must have shape {want}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{kind} {name!r}: {field} contains NaN or inf")
+    return arr
+
+
+@dataclass(frozen=True)
+class BodyPrim:
+    """A rigid body: its mesh in its own frame, and whether its pose changes over time.
+
+    Arrays are normalised on construction (points/normals float32 (n, 3), topology int32) and
+    validated: shapes, counts summing to the index count, indices within the points.
+    """
+
+    name: str
+    points: np.ndarray
+    face_vertex_counts: np.ndarray
+    face_vertex_indices: np.ndarray
+    normals: np.ndarray
+    dynamic: bool
+
+    def __post_init__(self) -> None:
+        _check_name("body", self.name)
+        pts = _vec3("body", self.name, "points", self.points)
+        nrm = _vec3("body", self.name, "normals", self.normals, pts.shape[0])
+        counts, idx = _topology("body", self.name, self.face_vertex_counts,
+                                self.face_vertex_indices)
+        if idx.size and idx.max() >= pts.shape[0]:
+            raise ValueError(f"body {self.name!r}: face vertex index {int(idx.max())} "
+                             f"out of range for {pts.shape[0]} points")
+        for field, value in (("points", pts), ("normals", nrm)):
+            value = np.ascontiguousarray(value, dtype=np.float32)
+            value.setflags(write=False)
+            object.__setattr__(self, field, value)
+        object.__setattr__(self, "face_vertex_counts", counts)
+        object.__setattr__(self, "face_vertex_indices", idx)
+        object.__setattr__(self, "dynamic", bool(self.dynamic))
+
+
+@dataclass(frozen=True)
+class ClothPrim:
+    """A cloth mesh: only its topology; points, normals and velocities come every frame."""
+
+    name: str
+    face_vertex_counts: np.ndarray
+    face_vertex_indices: np.ndarray
+
+    def __post_init__(self) -> None:
+        _check_name("cloth", self.name)
+        counts, idx = _topology("cloth", self.name, self.face_vertex_counts,
+                                self.face_vertex_indices)
+        object.__setattr__(self, "face_vertex_counts", counts)
+        object.__setattr__(self, "face_vertex_indices", idx)
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------
+
+def _to_usd(value: Any, where: str) -> Any:
+    """Convert a provenance value to something a USD dictionary stores faithfully."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, bool) or isinstance(value, str):
+        return value
+    if isinstance(value, int):
+        return value if -2**63 <= value < 2**63 else str(value)
+    if isinstance(value, float):
+        return value
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, Mapping):
+        return {str(k): _to_usd(v, f"{where}.{k}") for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        items = [v.item() if isinstance(v, np.generic) else v for v in value]
+        if all(isinstance(v, str) for v in items):
+            return Vt.StringArray(items)
+        if all(isinstance(v, bool) for v in items):
+            return Vt.BoolArray(items)
+        if all(isinstance(v, int) and not isinstance(v, bool) for v in items):
+            if all(-2**63 <= v < 2**63 for v in items):
+                return Vt.Int64Array(items)
+        elif all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in items):
+            return Vt.DoubleArray([float(v) for v in items])
+        # mixed or nested lists: a dictionary keyed by position keeps every value readable
+        return {f"{i:04d}": _to_usd(v, f"{where}[{i}]")
+                for i, v in enumerate(items) if v is not None}
+    raise TypeError(f"provenance {where}: cannot store a {type(value).__name__} in USD")
+
+
+def _extent(points32: np.ndarray) -> Vt.Vec3fArray:
+    if points32.shape[0] == 0:
+        return Vt.Vec3fArray.FromNumpy(np.zeros((2, 3), np.float32))
+    return Vt.Vec3fArray.FromNumpy(np.stack([points32.min(axis=0), points32.max(axis=0)]))
+
+
+def _vertex_normals(points: np.ndarray, counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (polygons fanned into triangles), unit length."""
+    p = np.asarray(points, dtype=np.float64)
+    normals = np.zeros_like(p)
+    starts = np.concatenate([[0], np.cumsum(counts[:-1], dtype=np.int64)]) if counts.size else counts
+    for c in np.unique(counts):
+        faces = indices[(starts[counts == c][:, None] + np.arange(c)).reshape(-1)].reshape(-1, c)
+        for k in range(1, c - 1):
+            a, b, d = faces[:, 0], faces[:, k], faces[:, k + 1]
+            fn = np.cross(p[b] - p[a], p[d] - p[a])
+            for v in (a, b, d):
+                np.add.at(normals, v, fn)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+    normals[length[:, 0] == 0] = (0.0, 1.0, 0.0)
+    return normals
+
+
+def _remove(path: Path) -> None:
+    try:
+        os.remove(path)
+    except FileNotFoundError:
+        pass
+
+
+def _cleanup(paths: list[Path]) -> None:  # weakref.finalize callback: must not reference self
+    for p in paths:
+        _remove(p)
+
+
+_counter = itertools.count()
+
+
+# --------------------------------------------------------------------------------------------
+# the writer
+# --------------------------------------------------------------------------------------------
+
+class CacheWriter:
+    """Streams a simbake USD cache (version 1) to ``path``; see the module docstring.
+
+    ``path`` ending in ``.usdc`` or ``.usd`` gives a binary crate file, ``.usda`` a text file;
+    any other suffix is a :class:`ValueError`. Frames ``start_frame..end_frame`` (inclusive)
+    must each be written exactly once, in increasing order. The file appears at ``path`` only
+    when :meth:`close` succeeds; :meth:`abort` (or an exception inside a ``with`` block)
+    leaves ``path`` as it was.
+    """
+
+    def __init__(self, path: str | Path, *, fps: float, start_frame: int, end_frame: int,
+                 bodies: Sequence[BodyPrim], cloths: Sequence[ClothPrim] = (),
+                 provenance: Mapping[str, Any] = {}, flush_every: int = 50):
+        self.path = Path(path)
+        suffix = self.path.suffix.lower()
+        if suffix not in FORMATS:
+            raise ValueError(f"{self.path}: unknown USD file extension {self.path.suffix!r} "
+                             f"(use one of {', '.join(sorted(FORMATS))})")
+        self.format = FORMATS[suffix]
+        fps = float(fps)
+        if not (math.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be a positive number, got {fps}")
+        if int(start_frame) != start_frame or int(end_frame) != end_frame:
+            raise ValueError("start_frame and end_frame must be integers")
+        start_frame, end_frame = int(start_frame), int(end_frame)
+        if end_frame < start_frame:
+            raise ValueError(f"end_frame {end_frame} is before start_frame {start_frame}")
+        if int(flush_every) < 1:
+            raise ValueError(f"flush_every must be >= 1, got {flush_every}")
+        bodies, cloths = tuple(bodies), tuple(cloths)
+        for b in bodies:
+            if not isinstance(b, BodyPrim):
+                raise TypeError(f"bodies must be BodyPrim, got {type(b).__name__}")
+        for c in cloths:
+            if not isinstance(c, ClothPrim):
+                raise TypeError(f"cloths must be ClothPrim, got {type(c).__name__}")
+        names = [p.name for p in bodies + cloths]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"duplicate prim names: {', '.join(dup)}")
+        if not self.path.parent.is_dir():
+            raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")
+        provenance_usd = _to_usd(dict(provenance), "customLayerData")
+
+        self.fps = fps
+        self.start_frame, self.end_frame = start_frame, end_frame
+        self.bodies, self.cloths = bodies, cloths
+        self.flush_every = int(flush_every)
+        self._next_frame = start_frame
+        self._since_flush = 0
+        self._static_pose: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._cloth_nverts: list[int | None] = [None] * len(cloths)
+        self._done = False
+
+        # temp files beside the target; the crate one always, the text one only for .usda
+        tag = f".{self.path.name}.{os.getpid()}-{next(_counter)}-{uuid.uuid4().hex[:8]}.tmp"
+        self._tmp = self.path.with_name(tag + ".usdc")
+        self._tmp_text = self.path.with_name(tag + ".usda") if self.format == "usda" else None
+        temps = [self._tmp] + ([self._tmp_text] if self._tmp_text else [])
+        self._finalizer = weakref.finalize(self, _cleanup, temps)
+
+        layer = Sdf.Layer.CreateNew(str(self._tmp), args={"format": "usdc"})
+        if layer is None:
+            raise OSError(f"{self._tmp}: cannot create USD layer")
+        self._layer = layer
+        try:
+            self._author_static(provenance_usd)
+            layer.Save()
+        except BaseException:
+            self.abort()
+            raise
+
+    # -- authoring ----------------------------------------------------------------------------
+
+    def _author_static(self, provenance: dict) -> None:
+        layer = self._layer
+        # stage-level metadata through the schema helpers, so the keys are the canonical ones
+        stage = Usd.Stage.Open(layer)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+        UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+        del stage
+        layer.timeCodesPerSecond = self.fps
+        layer.framesPerSecond = self.fps
+        layer.startTimeCode = float(self.start_frame)
+        layer.endTimeCode = float(self.end_frame)
+        layer.defaultPrim = "World"
+        if provenance:
+            layer.customLayerData = provenance
+
+        self._translate_paths: list[Sdf.Path] = []
+        self._orient_paths: list[Sdf.Path] = []
+        self._cloth_paths: list[tuple[Sdf.Path, Sdf.Path, Sdf.Path, Sdf.Path]] = []
+        with Sdf.ChangeBlock():
+            world = self._def(Sdf.Path.absoluteRootPath, "World", "Xform")
+            world.kind = "component"  # the cache is one referenceable asset (a leaf model)
+            for body in self.bodies:
+                xf = self._def(world.path, body.name, "Xform")
+                t = self._attr(xf, _TRANSLATE, _TN.Double3)
+                o = self._attr(xf, _ORIENT, _TN.Quatd)
+                self._attr(xf, "xformOpOrder", _TN.TokenArray, _OP_ORDER, uniform=True)
+                self._translate_paths.append(t.path)
+                self._orient_paths.append(o.path)
+                mesh = self._def(xf.path, "mesh", "Mesh")
+                self._mesh_topology(mesh, body.face_vertex_counts, body.face_vertex_indices)
+                self._attr(mesh, "points", _TN.Point3fArray, Vt.Vec3fArray.FromNumpy(body.points))
+                n = self._attr(mesh, "normals", _TN.Normal3fArray,
+                               Vt.Vec3fArray.FromNumpy(body.normals))
+                n.SetInfo("interpolation", UsdGeom.Tokens.vertex)
+                self._attr(mesh, "extent", _TN.Float3Array, _extent(body.points))
+            for cloth in self.cloths:
+                mesh = self._def(world.path, cloth.name, "Mesh")
+                self._mesh_topology(mesh, cloth.face_vertex_counts, cloth.face_vertex_indices)
+                self._attr(mesh, "doubleSided", _TN.Bool, True, uniform=True)
+                p = self._attr(mesh, "points", _TN.Point3fArray)
+                n = self._attr(mesh, "normals", _TN.Normal3fArray)
+                n.SetInfo("interpolation", UsdGeom.Tokens.vertex)
+                v = self._attr(mesh, "velocities", _TN.Vector3fArray)
+                e = self._attr(mesh, "extent", _TN.Float3Array)
+                self._cloth_paths.append((p.path, n.path, v.path, e.path))
+
+    def _def(self, parent: Sdf.Path, name: str, type_name: str) -> Sdf.PrimSpec:
+        spec = Sdf.CreatePrimInLayer(self._layer, parent.AppendChild(name))
+        spec.specifier = Sdf.SpecifierDef
+        spec.typeName = type_name
+        return spec
+
+    @staticmethod
+    def _attr(prim: Sdf.PrimSpec, name: str, type_name: Sdf.ValueTypeName, default: Any = None,
+              uniform: bool = False) -> Sdf.AttributeSpec:
+        var = Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying
+        attr = Sdf.AttributeSpec(prim, name, type_name, var)
+        if default is not None:
+            attr.default = default
+        return attr
+
+    def _mesh_topology(self, mesh: Sdf.PrimSpec, counts: np.ndarray, indices: np.ndarray) -> None:
+        self._attr(mesh, "faceVertexCounts", _TN.IntArray, Vt.IntArray.FromNumpy(counts))
+        self._attr(mesh, "faceVertexIndices", _TN.IntArray, Vt.IntArray.FromNumpy(indices))
+        self._attr(mesh, "subdivisionScheme", _TN.Token, UsdGeom.Tokens.none, uniform=True)
+        self._attr(mesh, "orientation", _TN.Token, UsdGeom.Tokens.rightHanded, uniform=True)
+
+    # -- per frame ----------------------------------------------------------------------------
+
+    def write_frame(self, frame: int, translations: np.ndarray, orientations: np.ndarray,
+                    cloth_points: Sequence[np.ndarray] = (),
+                    cloth_velocities: Sequence[np.ndarray] = (),
+                    cloth_normals: Sequence[np.ndarray] = ()) -> None:
+        """Author one frame.
+
+        ``translations`` (nbodies, 3): world position of each body's mesh origin;
+        ``orientations`` (nbodies, 4): unit quaternions ``[w, x, y, z]``, in the order of
+        ``bodies``. Static bodies take their pose from the first frame only (a later pose that
+        differs is a ``ValueError``). Per cloth: ``cloth_points`` and ``cloth_velocities``
+        (metres per second), both (nverts, 3), are required; ``cloth_normals`` may be left
+        empty, in which case area-weighted vertex normals are computed here.
+        Non-finite values raise :class:`simbake.errors.SimulationError`.
+        """
+        if self._done or self._layer is None:
+            raise RuntimeError(f"{self.path}: writer is already closed")
+        if frame != self._next_frame:
+            if self._next_frame > self.end_frame:
+                raise ValueError(f"frame {frame}: all frames up to {self.end_frame} are written")
+            raise ValueError(f"frame {frame}: expected frame {self._next_frame} "
+                             f"(frames {self.start_frame}..{self.end_frame}, in order, once each)")
+        nb = len(self.bodies)
+        tr = np.asarray(translations, dtype=np.float64).reshape(-1, 3) if nb else np.zeros((0, 3))
+        qs = np.asarray(orientations, dtype=np.float64).reshape(-1, 4) if nb else np.zeros((0, 4))
+        if tr.shape != (nb, 3) or qs.shape != (nb, 4):
+            raise ValueError(f"frame {frame}: expected translations ({nb}, 3) and orientations "
+                             f"({nb}, 4), got {np.shape(translations)} and {np.shape(orientations)}")
+        if not (np.isfinite(tr).all() and np.isfinite(qs).all()):
+            bad = ~(np.isfinite(tr).all(axis=1) & np.isfinite(qs).all(axis=1))
+            raise SimulationError(f"frame {frame}: body {self.bodies[int(np.argmax(bad))].name!r} "
+                                  "has a non-finite pose")
+        cloth_data = self._cloth_frame(frame, cloth_points, cloth_velocities, cloth_normals)
+
+        first = frame == self.start_frame
+        if not first:
+            for i, (t0, q0) in self._static_pose.items():
+                if (np.abs(tr[i] - t0).max() > _STATIC_POSE_ATOL
+                        or np.abs(qs[i] - q0).max() > _STATIC_POSE_ATOL):
+                    raise ValueError(f"frame {frame}: static body {self.bodies[i].name!r} "
+                                     "moved; mark it dynamic")
+
+        time = float(frame)
+        layer = self._layer
+        set_sample = layer.SetTimeSample
+        with Sdf.ChangeBlock():
+            for i, body in enumerate(self.bodies):
+                t, q = tr[i], qs[i]
+                if body.dynamic:
+                    set_sample(self._translate_paths[i], time, Gf.Vec3d(t[0], t[1], t[2]))
+                    set_sample(self._orient_paths[i], time, Gf.Quatd(q[0], q[1], q[2], q[3]))
+                elif first:
+                    self._static_pose[i] = (t.copy(), q.copy())
+                    layer.GetAttributeAtPath(self._translate_paths[i]).default = \
+                        Gf.Vec3d(t[0], t[1], t[2])
+                    layer.GetAttributeAtPath(self._orient_paths[i]).default = \
+                        Gf.Quatd(q[0], q[1], q[2], q[3])
+            for paths, (pts, nrm, vel) in zip(self._cloth_paths, cloth_data):
+                p_path, n_path, v_path, e_path = paths
+                set_sample(p_path, time, Vt.Vec3fArray.FromNumpy(pts))
+                set_sample(n_path, time, Vt.Vec3fArray.FromNumpy(nrm))
+                set_sample(v_path, time, Vt.Vec3fArray.FromNumpy(vel))
+                set_sample(e_path, time, _extent(pts))
+        self._next_frame += 1
+        self._since_flush += 1
+        if self._since_flush >= self.flush_every and self._next_frame <= self.end_frame:
+            self.flush()
+
+    def _cloth_frame(self, frame, points, velocities, normals):
+        nc = len(self.cloths)
+        points, velocities, normals = list(points), list(velocities), list(normals)
+        if len(points) != nc or len(velocities) != nc or len(normals) not in (0, nc):
+            raise ValueError(
+                f"frame {frame}: expected {nc} cloth_points and cloth_velocities arrays (and "
+                f"cloth_normals: {nc} or none), got {len(points)}, {len(velocities)}, "
+                f"{len(normals)}")
+        out = []
+        for c, cloth in enumerate(self.cloths):
+            p = np.ascontiguousarray(points[c], dtype=np.float32)
+            n = self._cloth_nverts[c]
+            if n is None:
+                n = p.shape[0] if p.ndim == 2 else -1
+                idx = cloth.face_vertex_indices
+                if idx.size and idx.max() >= n:
+                    raise ValueError(f"frame {frame}: cloth {cloth.name!r} has {n} points but "
+                                     f"its faces use vertex {int(idx.max())}")
+                self._cloth_nverts[c] = n
+            arrays = [p, np.ascontiguousarray(velocities[c], dtype=np.float32)]
+            if normals:
+                arrays.append(np.ascontiguousarray(normals[c], dtype=np.float32))
+            for what, a in zip(("points", "velocities", "normals"), arrays):
+                if a.shape != (n, 3):
+                    raise ValueError(f"frame {frame}: cloth {cloth.name!r} {what} must have "
+                                     f"shape ({n}, 3), got {a.shape}")
+                if not np.isfinite(a).all():
+                    raise SimulationError(f"frame {frame}: cloth {cloth.name!r} {what} "
+                                          "contain NaN or inf")
+            if not normals:
+                arrays.append(_vertex_normals(p, cloth.face_vertex_counts,
+                                              cloth.face_vertex_indices).astype(np.float32))
+            out.append((arrays[0], arrays[2], arrays[1]))
+        return out
+
+    # -- finishing ----------------------------------------------------------------------------
+
+    @property
+    def frames_written(self) -> int:
+        return self._next_frame - self.start_frame
+
+    def flush(self) -> None:
+        """Save what is authored so far to the temp file (crate saves append; memory drops)."""
+        if self._layer is None:
+            raise RuntimeError(f"{self.path}: writer is already closed")
+        if not self._layer.Save():
+            raise OSError(f"{self._tmp}: saving the USD layer failed")
+        self._since_flush = 0
+
+    def close(self) -> Path:
+        """Finish: final save, then move the file into place. Returns the path written.
+
+        Raises ``RuntimeError`` (and removes the temp file) if not every frame was written.
+        """
+        if self._done:
+            return self.path
+        if self._layer is None:
+            raise RuntimeError(f"{self.path}: writer was aborted")
+        if self._next_frame != self.end_frame + 1:
+            missing = self.end_frame + 1 - self._next_frame
+            self.abort()
+            raise RuntimeError(f"{self.path}: {missing} frame(s) not written (next expected "
+                               f"{self._next_frame}, end {self.end_frame}); nothing saved")
+        try:
+            self.flush()
+            final = self._tmp
+            if self._tmp_text is not None:
+                if not self._layer.Export(str(self._tmp_text)):
+                    raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
+                final = self._tmp_text
+            self._layer = None  # release the crate file before it is renamed or removed
+            os.replace(final, self.path)
+            if final != self._tmp:
+                _remove(self._tmp)
+        except BaseException:
+            self.abort()
+            raise
+        self._done = True
+        self._finalizer.detach()
+        return self.path
+
+    def abort(self) -> None:
+        """Discard everything: remove the temp file(s); ``path`` is left untouched."""
+        if self._done:
+            return
+        self._layer = None
+        self._finalizer()  # removes the temp files (once)
+
+    def __enter__(self) -> "CacheWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
