@@ -135,12 +135,12 @@ PYBIND11_MODULE(_core, m) {
       .def("set_ground", [](World& w, double height, double friction, double restitution) {
              w.set_ground(GroundDef{height, friction, restitution});
            }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)
-      .def("add_body", [](World& w, const LevelSet& shape, const Points& samples, const py::dict& mass_properties,
+      .def("add_body", [](World& w, const LevelSet* shape, const Points& samples, const py::dict& mass_properties,
                           double mass, const Vec3& origin, const Eigen::Vector4d& orientation,
                           const Vec3& linear_velocity, const Vec3& angular_velocity, double friction,
                           double restitution, bool kinematic) {
              BodyDesc d;
-             d.shape = shape.distance;
+             if (shape) d.shape = shape->distance;
              d.samples = samples;
              d.unit_mass = mass_from_dict(mass_properties);
              d.mass = mass;

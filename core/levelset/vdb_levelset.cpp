@@ -159,27 +159,30 @@ std::shared_ptr<VdbLevelSet> VdbLevelSet::bake(const Points& vertices,
   grid->setName(kGridName);
   grid->setGridClass(openvdb::GRID_LEVEL_SET);
   if (grid->activeVoxelCount() == 0)
-    throw std::invalid_argument("VdbLevelSet::bake: mesh produced no voxels (degenerate mesh?)");
+    throw std::invalid_argument("VdbLevelSet::bake: the mesh produced no voxels (degenerate mesh?)");
 
   return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
 }
 
 std::shared_ptr<VdbLevelSet> VdbLevelSet::read(const std::string& path) {
   initialize_openvdb();
-  // open the file; OpenVDB's IoError says little, so re-throw with the path
-  openvdb::io::File file(path);
+  // read every grid (no delayed loading: the grid must not depend on the file afterwards,
+  // and lazy loading would mutate the tree during const queries); errors name the path
+  openvdb::GridPtrVecPtr grids;
   try {
-    file.open();
+    openvdb::io::File file(path);
+    file.open(/*delayLoad=*/false);
+    grids = file.getGrids();
+    file.close();
   } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": cannot open as a .vdb file (" + e.what() + ")");
+    throw std::runtime_error(path + ": cannot read as a .vdb file (" + e.what() + ")");
   }
   // first FloatGrid in the file
   FloatGrid::Ptr grid;
-  for (const openvdb::GridBase::Ptr& g : *file.getGrids()) {
+  for (const openvdb::GridBase::Ptr& g : *grids) {
     grid = openvdb::gridPtrCast<FloatGrid>(g);
     if (grid) break;
   }
-  file.close();
   if (!grid) throw std::runtime_error(path + ": no float grid in the file");
   return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
 }

@@ -21,7 +21,8 @@ struct RigidBodyDef {
   double friction = 0.5;                     // Coulomb coefficient
   double restitution = 0.0;                  // in [0, 1]
   bool kinematic = false;                    // infinite mass, moved only by its own motion
-  SignedDistancePtr shape;                   // signed distance in mesh coordinates
+  SignedDistancePtr shape;                   // signed distance in mesh coordinates; null when
+                                             // nothing can touch the body (no grid baked)
   Points samples;                            // (s x 3) surface samples in mesh coordinates (m)
   double bounding_radius = 0.0;              // largest |sample - center| (m)
   double thickness = 0.0;                    // smallest extent of the shape (m), for substeps

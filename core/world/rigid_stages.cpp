@@ -115,6 +115,7 @@ Vec3 World::point_velocity(int i, const Vec3& x, Velocities mode) const {
 
 void World::find_penetrations(int a, int b, Velocities mode, bool only_approaching,
                               std::vector<Penetration>& out) const {
+  if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
   const Pose& pose_a = candidate_poses_[a];
   const Points& samples = defs_[a].samples;
   Box3 local_bounds;

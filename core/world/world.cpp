@@ -50,7 +50,6 @@ void World::set_ground(const GroundDef& ground) {
 }
 
 int World::add_body(const BodyDesc& desc) {
-  require(desc.shape != nullptr, "body needs a shape");
   require(desc.samples.rows() > 0 && desc.samples.allFinite(), "body needs finite surface samples");
   require(desc.kinematic || (desc.mass > 0.0 && std::isfinite(desc.mass)), "body mass must be > 0");
   require(desc.unit_mass.volume > 0.0, "body shape must enclose a positive volume");
@@ -84,7 +83,11 @@ int World::add_body(const BodyDesc& desc) {
     const Vec3 p = def.samples.row(s);
     def.bounding_radius = std::max(def.bounding_radius, (p - def.center).norm());
   }
-  def.thickness = def.shape->bounds().sizes().minCoeff();
+  const Box3 extent = def.shape ? def.shape->bounds()
+                                : Box3(def.samples.colwise().minCoeff().transpose(),
+                                       def.samples.colwise().maxCoeff().transpose());
+  def.thickness = extent.sizes().minCoeff();
+  require(def.thickness > 0.0, "body must have a positive extent along every axis");
 
   RigidBodyState state;
   set_mesh_pose(def, desc.origin, desc.orientation, state);
@@ -172,7 +175,7 @@ double World::max_penetration() const {
     const Points& samples = defs_[a].samples;
     for (int b = kGround; b < body_count(); ++b) {
       if (b == a || (b == kGround && !ground_)) continue;
-      if (b != kGround && defs_[a].kinematic && defs_[b].kinematic) continue;
+      if (b != kGround && ((defs_[a].kinematic && defs_[b].kinematic) || !defs_[b].shape)) continue;
       const Pose pose_b = b == kGround ? Pose() : mesh_pose(defs_[b], states_[b]);
       for (Eigen::Index s = 0; s < samples.rows(); ++s) {
         const Vec3 x = pose_a.apply(samples.row(s).transpose());

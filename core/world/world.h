@@ -43,7 +43,8 @@ struct GroundDef {
 
 // Creation settings of one body; the world turns them into a RigidBodyDef and a state
 struct BodyDesc {
-  SignedDistancePtr shape;          // in mesh coordinates
+  SignedDistancePtr shape;          // in mesh coordinates; may be null when no other body
+                                    // can touch this one (its samples still meet the ground)
   Points samples;                   // (s x 3) surface samples, mesh coordinates (m)
   MassProperties unit_mass;         // of the shape at density 1, mesh coordinates
   double mass = 1.0;                // (kg); ignored for kinematic bodies

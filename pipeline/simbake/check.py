@@ -29,17 +29,21 @@ from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdValidation, Vt
 
 __all__ = ["check_cache", "UNIT_QUAT_TOL"]
 
 UNIT_QUAT_TOL = 1e-5
 _EXTENT_RTOL = 1e-6
+# small value type -> its Vt array type: many samples convert to numpy in one C++ call
+_ARRAY_OF = {Gf.Vec2d: Vt.Vec2dArray, Gf.Vec3d: Vt.Vec3dArray, Gf.Vec4d: Vt.Vec4dArray,
+             Gf.Vec2f: Vt.Vec2fArray, Gf.Vec3f: Vt.Vec3fArray, Gf.Vec4f: Vt.Vec4fArray,
+             Gf.Quatd: Vt.QuatdArray, Gf.Quatf: Vt.QuatfArray, Gf.Quath: Vt.QuathArray,
+             Gf.Matrix4d: Vt.Matrix4dArray, Gf.Matrix3d: Vt.Matrix3dArray}
 
 
 def check_cache(path: str | Path, *, warnings: bool = True) -> list[str]:
     """Return every problem found in the USD cache at ``path``; empty if it is fine."""
-    from pxr import Sdf, Usd, UsdGeom, UsdPhysics, UsdValidation  # noqa: F401  (lazy: slow import)
-
     path = Path(path)
     if not path.is_file():
         return [f"{path}: no such file" if not path.exists() else f"{path}: not a file"]
@@ -73,7 +77,6 @@ def _one_line(text: str) -> str:
 
 def _open_fresh(path: Path):
     """Open ``path`` as it is on disk now, even if someone in this process holds the layer."""
-    from pxr import Sdf, Usd
 
     layer = Sdf.Layer.Find(str(path))
     if layer is not None:
@@ -89,7 +92,6 @@ def _open_fresh(path: Path):
 
 
 def _validators(stage, path: Path, warnings: bool) -> list[str]:
-    from pxr import UsdValidation
 
     kinds = {UsdValidation.ValidationErrorType.Error: "error"}
     if warnings:
@@ -113,7 +115,6 @@ def _validators(stage, path: Path, warnings: bool) -> list[str]:
 
 
 def _metadata(stage, path: Path, problems: list[str]) -> tuple[float | None, float | None]:
-    from pxr import UsdGeom, UsdPhysics
 
     layer = stage.GetRootLayer()
     dp = stage.GetDefaultPrim()
@@ -154,32 +155,31 @@ def _metadata(stage, path: Path, problems: list[str]) -> tuple[float | None, flo
 
 
 def _floats(value: Any) -> np.ndarray | None:
-    """The floating-point numbers in a USD value, or None if it holds none."""
-    from pxr import Gf
-
+    """The floating-point numbers in one USD value, or None if it holds none."""
     if value is None or isinstance(value, (bool, int, str)):
         return None
     if isinstance(value, float):
         return np.array([value])
     if isinstance(value, (Gf.Quatd, Gf.Quatf, Gf.Quath)):
-        return _quat(value)
+        im = value.GetImaginary()
+        return np.array([value.GetReal(), im[0], im[1], im[2]], dtype=np.float64)
     try:
         arr = np.asarray(value)
     except Exception:
         return None
-    if arr.dtype.kind == "f":
-        return arr
-    if arr.dtype == object and arr.size:  # e.g. arrays of quaternions
-        try:
-            return np.array([_quat(q) for q in value], dtype=np.float64)
-        except Exception:
-            return None
-    return None
+    return arr if arr.dtype.kind == "f" else None
 
 
-def _quat(q) -> np.ndarray:
-    im = q.GetImaginary()
-    return np.array([q.GetReal(), im[0], im[1], im[2]], dtype=np.float64)
+def _bulk(values: list) -> np.ndarray | None:
+    """Many samples of one small type (a double3, a quatd...) as one (n, k) array, fast."""
+    t = type(values[0])
+    if t is float and all(type(v) is float for v in values):
+        return np.array(values, dtype=np.float64)[:, None]
+    make = _ARRAY_OF.get(t)
+    if make is None or not all(type(v) is t for v in values):
+        return None
+    arr = np.asarray(make(values), dtype=np.float64)  # (quaternions come out as x, y, z, w)
+    return arr.reshape(len(values), -1)
 
 
 def _report(problems, path, attr, what, bad_times: list, total: int) -> None:
@@ -192,9 +192,7 @@ def _report(problems, path, attr, what, bad_times: list, total: int) -> None:
 
 
 def _check_attribute(attr, frames: np.ndarray | None, path: Path, problems: list[str]) -> None:
-    from pxr import Usd
-
-    times = attr.GetTimeSamples()
+    times = attr.GetTimeSamples()  # composed: what a consumer sees
     if times and frames is not None:
         t = np.asarray(times, dtype=np.float64)
         missing = np.setdiff1d(frames, t)
@@ -206,34 +204,48 @@ def _check_attribute(attr, frames: np.ndarray | None, path: Path, problems: list
             problems.append(f"{path}: {attr.GetPath()}: {extra.size} time sample(s) outside the "
                             f"whole frames {frames[0]:g}..{frames[-1]:g}, first {extra[0]:g}")
 
+    # values: every authored opinion (default and samples) in every layer, read in bulk
     is_orient = attr.GetName().startswith("xformOp:orient")
-    codes: Iterable = ([None] if attr.HasAuthoredValue() and _has_default(attr) else []) + list(times)
-    nonfinite, nonunit, total = [], [], 0
-    for t in codes:
-        value = attr.Get(Usd.TimeCode.Default() if t is None else Usd.TimeCode(t))
-        arr = _floats(value)
-        if arr is None:
-            continue
-        total += 1
-        if not np.isfinite(arr).all():
-            nonfinite.append(t)
-            continue
-        if is_orient and arr.size == 4 and abs(np.linalg.norm(arr) - 1.0) > UNIT_QUAT_TOL:
-            nonunit.append(t)
-    _report(problems, path, attr, "NaN or inf", nonfinite, total)
-    _report(problems, path, attr, f"quaternion length differs from 1 by more than "
-                                  f"{UNIT_QUAT_TOL:g}", nonunit, total)
-
-
-def _has_default(attr) -> bool:
+    nonfinite: list = []
+    nonunit: list = []
+    total = 0
     for spec in attr.GetPropertyStack():
+        opinions: list[tuple[float | None, Any]] = []
         if spec.HasDefaultValue():
-            return True
-    return False
+            opinions.append((None, spec.default))
+        if spec.HasInfo("timeSamples"):
+            samples = spec.GetInfo("timeSamples")
+            keep = [(float(k), v) for k, v in sorted(samples.items())
+                    if v is not None and not isinstance(v, Sdf.ValueBlock)]
+            bulk = _bulk([v for _, v in keep]) if keep else None
+            if bulk is not None:
+                codes = np.array([k for k, _ in keep])
+                total += len(keep)
+                finite = np.isfinite(bulk).all(axis=1)
+                nonfinite += codes[~finite].tolist()
+                if is_orient and bulk.shape[1] == 4:
+                    off = np.abs(np.linalg.norm(bulk, axis=1) - 1.0) > UNIT_QUAT_TOL
+                    nonunit += codes[finite & off].tolist()
+            else:
+                opinions += keep
+        for code, value in opinions:
+            arr = _floats(value)
+            if arr is None:
+                continue
+            total += 1
+            if not np.isfinite(arr).all():
+                nonfinite.append(code)
+            elif is_orient and arr.size % 4 == 0:
+                norms = np.linalg.norm(arr.reshape(-1, 4), axis=1)
+                if (np.abs(norms - 1.0) > UNIT_QUAT_TOL).any():
+                    nonunit.append(code)
+    order = lambda c: (-math.inf if c is None else c)  # noqa: E731  default first
+    _report(problems, path, attr, "NaN or inf", sorted(nonfinite, key=order), total)
+    _report(problems, path, attr, f"quaternion length differs from 1 by more than "
+                                  f"{UNIT_QUAT_TOL:g}", sorted(nonunit, key=order), total)
 
 
 def _check_extent(geom, path: Path, problems: list[str]) -> None:
-    from pxr import Usd
 
     points, extent = geom.GetPointsAttr(), geom.GetExtentAttr()
     if not points.HasAuthoredValue():

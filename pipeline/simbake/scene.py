@@ -124,6 +124,7 @@ class Scene:
     """A validated scene. Keyword-only because ``end_frame`` is required but follows defaults."""
 
     path: Path  # the scene file: absolute, its directory resolved
+    source: str = ""  # the scene file as the user named it, for messages
     fps: float = 24.0
     start_frame: int = 1
     end_frame: int
@@ -210,6 +211,7 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
 
     return Scene(
         path=scene_path,
+        source=file,
         fps=settings.number("fps", Scene.fps, _greater(0)),
         start_frame=start_frame,
         end_frame=end_frame,

@@ -1,0 +1,60 @@
+# simbake's front door. Every target installs what it needs, from a fresh Debian machine:
+# missing system packages (apt-get, with sudo when not root), a virtual environment in
+# .venv, and the package itself (built by scikit-build-core, incrementally, in build/py).
+#
+#   make demo    bake the shipped default scene and print where the USD went
+#   make test    C++ tests (ctest) and Python tests (pytest)
+#   make bench   run-time-versus-error sweeps, written into benchmarks/results
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+BUILD := build/py
+export CMAKE_BUILD_PARALLEL_LEVEL ?= 2
+
+SYSTEM_PACKAGES := g++ make libopenvdb-dev libeigen3-dev libtbb-dev libboost-iostreams-dev libgtest-dev
+BUILD_REQUIRES := "scikit-build-core>=0.10" "pybind11>=2.12" "cmake>=3.18" ninja
+SOURCES := $(shell find core bindings -name '*.cpp' -o -name '*.h') $(wildcard tests/cpp/*) CMakeLists.txt pyproject.toml
+
+.PHONY: demo test bench install system clean
+
+demo: install
+	$(VENV)/bin/simbake demo
+
+test: install
+	$(VENV)/bin/ctest --test-dir $(BUILD) --output-on-failure --timeout 300 -j2
+	$(PY) -m pytest
+
+bench: install
+	$(PY) -m pip install -q -e '.[bench]' --no-build-isolation --no-deps
+	$(PY) -m pip install -q matplotlib
+	$(PY) benchmarks/run_all.py
+
+install: $(VENV)/.installed
+
+system: build/.system-packages
+
+# System packages: installed only when missing (dpkg -s is the check)
+build/.system-packages:
+	@missing=""; for p in $(SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  sudo=""; [ "$$(id -u)" -eq 0 ] || sudo=sudo; \
+	  echo "installing system packages:$$missing"; \
+	  $$sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq $$missing; \
+	fi
+	@mkdir -p build && touch $@
+
+$(VENV)/.build-requires: | build/.system-packages
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q $(BUILD_REQUIRES)
+	touch $@
+
+# The package, editable: Python changes need no reinstall; C++ changes rebuild incrementally
+$(VENV)/.installed: $(VENV)/.build-requires $(SOURCES)
+	$(PY) -m pip install -q --no-build-isolation -e '.[test]' \
+	  -Cbuild-dir=$(BUILD) -Ccmake.define.SIMBAKE_BUILD_TESTS=ON
+	touch $@
+
+clean:
+	rm -rf build $(VENV)

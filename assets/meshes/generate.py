@@ -1,0 +1,58 @@
+"""Writes the shipped meshes (closed, consistently wound, origin at the centre): run it from
+anywhere with `python assets/meshes/generate.py`; the files are checked in."""
+
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    lines = [f"# {path.name}, made by generate.py"]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def torus(major: float, minor: float, n_major: int, n_minor: int):
+    """Ring around the y axis: u goes round the ring, v round the tube."""
+    u = np.arange(n_major) * 2 * np.pi / n_major
+    v = np.arange(n_minor) * 2 * np.pi / n_minor
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    radius = major + minor * np.cos(vv)
+    vertices = np.stack([radius * np.cos(uu), minor * np.sin(vv), radius * np.sin(uu)], -1).reshape(-1, 3)
+    faces = []
+    for i in range(n_major):
+        for j in range(n_minor):
+            a, b = i * n_minor + j, ((i + 1) % n_major) * n_minor + j
+            c, d = ((i + 1) % n_major) * n_minor + (j + 1) % n_minor, i * n_minor + (j + 1) % n_minor
+            faces += [(a, d, c), (a, c, b)]
+    return vertices, np.array(faces)
+
+
+def l_prism(outline, depth: float):
+    """A polygon in the xy plane (counter-clockwise) extruded along z, centred on z = 0.
+    The caps are a fan from vertex 0, which must see every other vertex."""
+    outline = np.asarray(outline, dtype=float)
+    n = len(outline)
+    front = np.column_stack([outline, np.full(n, depth / 2)])
+    back = np.column_stack([outline, np.full(n, -depth / 2)])
+    vertices = np.vstack([front, back])
+    faces = [(0, k, k + 1) for k in range(1, n - 1)]               # front, facing +z
+    faces += [(n, n + k + 1, n + k) for k in range(1, n - 1)]       # back, facing -z
+    for k in range(n):
+        a, b = k, (k + 1) % n
+        faces += [(a, n + a, n + b), (a, n + b, b)]                 # sides, facing out
+    return vertices, np.array(faces)
+
+
+def main() -> None:
+    write_obj(HERE / "torus.obj", *torus(0.3, 0.1, 32, 16))
+    # an L of two 0.2 m thick legs, 0.6 m tall and 0.4 m wide, centred on its bounding box
+    outline = np.array([(0.0, 0.0), (0.4, 0.0), (0.4, 0.2), (0.2, 0.2), (0.2, 0.6), (0.0, 0.6)])
+    write_obj(HERE / "lshape.obj", *l_prism(outline - (0.2, 0.3), 0.2))
+
+
+if __name__ == "__main__":
+    main()

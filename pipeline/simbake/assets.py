@@ -1,0 +1,151 @@
+"""Assets: the geometry of each body, and its level set, ready for the core.
+
+Meshes are read with trimesh (any format it reads), merged into one triangle mesh and
+checked: a body's mesh must be closed (watertight, consistently wound) because its mass
+properties and its level set both need an inside. Primitives get exact analytic distances
+and mass properties; their surface samples and USD mesh are a cube-projected sphere or a
+subdivided box.
+
+Level sets are baked with OpenVDB only for bodies something can touch, and cached on disk
+by a hash of the mesh and the voxel size: a second bake of the same scene reads them back.
+The cache lives in ``$SIMBAKE_CACHE_DIR`` or ``$XDG_CACHE_HOME/simbake`` (default
+``~/.cache/simbake``); every file is written beside and renamed, so a crash never leaves a
+half-written grid that a later bake would trust.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import _core
+from .errors import SceneError
+from .scene import Body, Scene
+
+SPHERE_SUBDIVISIONS = 8  # 386 samples on a sphere, 0.5% faceting of the radius
+BOX_SUBDIVISIONS = 4     # 98 samples on a box: corners, edges and faces
+VOXELS_ACROSS = 64       # automatic voxel size: the longest extent over this ...
+MIN_VOXELS_THIN = 6      # ... but at least this many voxels across the thinnest extent
+CACHE_FORMAT = "levelset-v1"
+
+
+@dataclass(frozen=True)
+class BodyAsset:
+    """Geometry of one body in its mesh's own frame."""
+
+    vertices: np.ndarray        # (n, 3) float64 (m)
+    triangles: np.ndarray       # (m, 3) int32
+    normals: np.ndarray         # (n, 3) float64, area-weighted vertex normals
+    mass_properties: dict       # volume, center, inertia at unit density
+    level_set: "_core.LevelSet | None"  # None when nothing can touch the body
+    voxel_size: float           # of the baked grid, 0 when analytic or not baked
+
+
+def cache_dir() -> Path:
+    if "SIMBAKE_CACHE_DIR" in os.environ:
+        return Path(os.environ["SIMBAKE_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "simbake"
+
+
+def load_mesh(path: Path, file: str | Path, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """A closed triangle mesh from any file trimesh reads, or a SceneError."""
+    import trimesh
+
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=True)
+    except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
+        detail = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise SceneError(file, key, f"cannot read mesh {path}: {detail}") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise SceneError(file, key, f"{path} holds no triangles")
+    if not mesh.is_watertight:
+        raise SceneError(file, key, f"{path} is not a closed mesh (it has holes or open edges); "
+                                    "a rigid body needs a closed surface")
+    if not mesh.is_winding_consistent:
+        raise SceneError(file, key, f"{path} has inconsistently wound triangles")
+    if mesh.volume < 0:
+        mesh.invert()  # inside out: turn it the right way
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    triangles = np.ascontiguousarray(mesh.faces, dtype=np.int32)
+    if not np.isfinite(vertices).all():
+        raise SceneError(file, key, f"{path} has non-finite vertex coordinates")
+    return vertices, triangles
+
+
+def automatic_voxel_size(vertices: np.ndarray) -> float:
+    extent = vertices.max(axis=0) - vertices.min(axis=0)
+    return float(min(extent.max() / VOXELS_ACROSS, extent.min() / MIN_VOXELS_THIN))
+
+
+def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
+                   cache: Path | None = None) -> "_core.LevelSet":
+    """The mesh's level set, read from the cache when this mesh and voxel size were baked before."""
+    cache = cache_dir() if cache is None else cache
+    digest = hashlib.sha256()
+    digest.update(CACHE_FORMAT.encode())
+    digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
+    digest.update(np.ascontiguousarray(triangles, dtype="<i4").tobytes())
+    digest.update(repr(float(voxel_size)).encode())
+    path = cache / "levelsets" / f"{digest.hexdigest()}.vdb"
+    if path.is_file():
+        try:
+            return _core.LevelSet.read(str(path))
+        except RuntimeError:
+            pass  # unreadable cache entry: bake again and replace it
+    level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(suffix=".vdb.tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            level_set.write(tmp)
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    except OSError:
+        pass  # a read-only cache costs a re-bake next time, nothing else
+    return level_set
+
+
+def needs_level_set(scene: Scene) -> bool:
+    """A body's level set is needed only when another body or a cloth could touch it."""
+    return len(scene.bodies) + len(scene.cloths) > 1
+
+
+def load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> BodyAsset:
+    key = f"bodies[{index}]"
+    file = scene.source or str(scene.path)
+    shape = body.shape
+    voxel_size = 0.0
+    if shape.kind == "sphere":
+        vertices, triangles = _core.sphere_mesh(shape.radius, SPHERE_SUBDIVISIONS)
+        props = _core.sphere_mass_properties(shape.radius)
+        level_set = _core.LevelSet.sphere(shape.radius)
+    elif shape.kind == "box":
+        vertices, triangles = _core.box_mesh(np.array(shape.size), BOX_SUBDIVISIONS)
+        props = _core.box_mass_properties(np.array(shape.size))
+        level_set = _core.LevelSet.box(np.array(shape.size))
+    else:
+        vertices, triangles = load_mesh(shape.mesh_path, file, f"{key}.mesh")
+        try:
+            props = _core.mass_properties(vertices, triangles)
+        except ValueError as error:
+            raise SceneError(file, f"{key}.mesh", f"{shape.mesh_path}: {error}") from None
+        level_set = None
+        if with_level_set:
+            voxel_size = body.voxel_size or automatic_voxel_size(vertices)
+            level_set = bake_level_set(vertices, triangles, voxel_size)
+    normals = _core.vertex_normals(vertices, triangles)
+    return BodyAsset(vertices, triangles, normals, props, level_set, voxel_size)
+
+
+def load_assets(scene: Scene) -> list[BodyAsset]:
+    touchable = needs_level_set(scene)
+    return [load_body(scene, i, body, touchable) for i, body in enumerate(scene.bodies)]
