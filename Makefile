@@ -26,8 +26,7 @@ test: install
 	$(PY) -m pytest
 
 bench: install
-	$(PY) -m pip install -q -e '.[bench]' --no-build-isolation --no-deps
-	$(PY) -m pip install -q matplotlib
+	$(PY) -m pip install -q "matplotlib>=3.7"
 	$(PY) benchmarks/run_all.py
 
 install: $(VENV)/.installed

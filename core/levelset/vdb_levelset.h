@@ -31,7 +31,7 @@ class VdbLevelSet final : public SignedDistance {
   double phi(const Vec3& p) const override;
   // trilinear phi and the normalized gradient of the trilinear interpolant
   double phi_and_normal(const Vec3& p, Vec3& normal) const override;
-  // bounds of the zero level set (the active voxels, shrunk by the exterior band)
+  // box containing the zero level set (the active voxels shrunk by the band less one voxel)
   Box3 bounds() const override;
 
   double voxel_size() const;

@@ -1,0 +1,49 @@
+"""Shared fixtures for the end-to-end pipeline and CLI tests.
+
+* every test gets its own level-set cache directory (``SIMBAKE_CACHE_DIR``), so no test
+  reads or writes ``~/.cache/simbake`` and no test sees another's cached grids;
+* ``write_scene(text, name)`` writes a scene TOML into ``tmp_path`` and returns its path;
+* ``meshes`` copies the shipped torus and L-shape OBJs into ``tmp_path``.
+"""
+
+from __future__ import annotations
+
+import shutil
+import textwrap
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+MESH_DIR = REPO / "assets" / "meshes"
+
+
+@pytest.fixture(autouse=True)
+def simbake_cache_dir(tmp_path_factory, monkeypatch) -> Path:
+    """A private, initially absent level-set cache for each test (subprocesses inherit it)."""
+    cache = tmp_path_factory.mktemp("simbake-cache") / "cache"
+    monkeypatch.setenv("SIMBAKE_CACHE_DIR", str(cache))
+    # make sure nothing falls back to the real home cache if the variable were ignored
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache.parent / "xdg-must-stay-unused"))
+    return cache
+
+
+@pytest.fixture
+def write_scene(tmp_path):
+    """write_scene(text, name="scene.toml") -> the path of the scene file in tmp_path."""
+
+    def write(text: str, name: str = "scene.toml") -> Path:
+        path = tmp_path / name
+        path.write_text(textwrap.dedent(text))
+        return path
+
+    return write
+
+
+@pytest.fixture
+def meshes(tmp_path) -> dict[str, Path]:
+    """The shipped torus.obj and lshape.obj copied into tmp_path, by stem."""
+    out = {}
+    for name in ("torus.obj", "lshape.obj"):
+        out[Path(name).stem] = Path(shutil.copy(MESH_DIR / name, tmp_path / name))
+    return out
