@@ -90,6 +90,9 @@ def machine_info() -> dict:
     }
 
 
+_WALL_OVER_CPU: list[float] = []  # of every timed repeat since the last write_result
+
+
 def median_time(body: Callable[[object], object], setup: Callable[[], object] = lambda: None,
                 repeats: int = 5) -> dict:
     """Median wall time of body(setup()) over `repeats`; only body is inside the clock."""
@@ -100,6 +103,8 @@ def median_time(body: Callable[[object], object], setup: Callable[[], object] = 
         body(state)
         cpu.append(time.process_time() - start_cpu)
         times.append(time.perf_counter() - start)
+        if cpu[-1] > 0.0:
+            _WALL_OVER_CPU.append(times[-1] / cpu[-1])
     return {"median": statistics.median(times), "min": min(times), "max": max(times),
             "cpu_median": statistics.median(cpu), "repeats": repeats, "all": times}
 
@@ -228,6 +233,7 @@ class Result:
     xlabel: str
     ylabel: str
     notes: list[str] = field(default_factory=list)
+    reference_lines: list[tuple[float, str]] = field(default_factory=list)  # dashed (y, label)
 
 
 def fmt(value, digits: int = 3) -> str:
@@ -295,6 +301,10 @@ def plot(result: Result, path: Path) -> None:
         for x, y, label in zip(xs, ys, labels):
             ax.annotate(label, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=7.5,
                         color=line.get_color())
+    for y, label in result.reference_lines:
+        ax.axhline(y, color="gray", linestyle="--", linewidth=0.9)
+        ax.annotate(label, (0.01, y), xycoords=("axes fraction", "data"), textcoords="offset points",
+                    xytext=(0, 3), fontsize=7.5, color="gray")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel(result.xlabel)
@@ -312,14 +322,18 @@ def plot(result: Result, path: Path) -> None:
 def write_result(result: Result, seconds: float, results_dir: Path = RESULTS_DIR) -> dict:
     results_dir.mkdir(parents=True, exist_ok=True)
     info = machine_info()
+    ratio = statistics.median(_WALL_OVER_CPU) if _WALL_OVER_CPU else float("nan")
+    _WALL_OVER_CPU.clear()
     payload = {"benchmark": result.name, "title": result.title, "machine": info,
-               "benchmark_wall_seconds": seconds, "notes": result.notes, "results": result.data}
+               "benchmark_wall_seconds": seconds, "median_wall_over_cpu": ratio,
+               "notes": result.notes, "results": result.data}
     (results_dir / f"{result.name}.json").write_text(json.dumps(_jsonable(payload), indent=2) + "\n")
     md = [f"# {result.title}", "",
           f"simbake {info['simbake_version']}, {info['cpu_model']}, one thread, {info['date']}, "
           f"load average {', '.join(f'{v:.2f}' for v in info['load_average_1_5_15_min'])} "
           f"(2 vCPU); the benchmark took {seconds:.1f} s. Wall times are medians of repeats "
-          "of the stepping (or baking) alone.", "",
+          f"of the stepping (or baking) alone; wall / CPU time of those repeats: {ratio:.2f} "
+          "(median; 1.0 = the CPU was ours alone).", "",
           markdown_table(result.table_headers, result.table_rows), ""]
     md += [f"- {note}" for note in result.notes]
     (results_dir / f"{result.name}.md").write_text("\n".join(md).rstrip() + "\n")
@@ -328,6 +342,7 @@ def write_result(result: Result, seconds: float, results_dir: Path = RESULTS_DIR
 
 
 def run_and_write(run: Callable[[], Result]) -> Result:
+    _WALL_OVER_CPU.clear()
     start = time.perf_counter()
     result = run()
     seconds = time.perf_counter() - start

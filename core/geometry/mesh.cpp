@@ -1,6 +1,8 @@
 #include "geometry/mesh.h"
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <map>
 #include <stdexcept>
@@ -89,6 +91,30 @@ TriangleMesh make_box_mesh(const Vec3& size, int subdivisions) {
   const Vec3 half = 0.5 * size;
   return make_cube_lattice(subdivisions,
                            [half](const Vec3& c) -> Vec3 { return c.cwiseProduct(half); });
+}
+
+Points surface_samples(const TriangleMesh& mesh, double max_spacing) {
+  if (!(max_spacing > 0.0)) throw std::invalid_argument("sample spacing must be > 0");
+  std::vector<std::pair<int, int>> edges;
+  edges.reserve(static_cast<std::size_t>(mesh.triangles.rows()) * 3);
+  for (Eigen::Index t = 0; t < mesh.triangles.rows(); ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const int a = mesh.triangles(t, k), b = mesh.triangles(t, (k + 1) % 3);
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  std::vector<Vec3> extra;
+  for (const auto& [a, b] : edges) {
+    const Vec3 pa = mesh.vertices.row(a), pb = mesh.vertices.row(b);
+    const int pieces = static_cast<int>(std::ceil((pb - pa).norm() / max_spacing));
+    for (int k = 1; k < pieces; ++k) extra.push_back(pa + (pb - pa) * (double(k) / pieces));
+  }
+  Points samples(mesh.vertices.rows() + static_cast<Eigen::Index>(extra.size()), 3);
+  samples.topRows(mesh.vertices.rows()) = mesh.vertices;
+  for (std::size_t k = 0; k < extra.size(); ++k) samples.row(mesh.vertices.rows() + k) = extra[k].transpose();
+  return samples;
 }
 
 bool is_closed(const TriangleMesh& mesh) {

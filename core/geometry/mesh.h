@@ -24,6 +24,11 @@ TriangleMesh make_sphere_mesh(double radius, int subdivisions);
 // into subdivisions x subdivisions quads (vertices shared along edges, so the mesh is closed).
 TriangleMesh make_box_mesh(const Vec3& size, int subdivisions);
 
+// Collision samples of a surface: every vertex, then points spaced at most max_spacing
+// apart along every edge longer than that (so that a coarse mesh's edges can still catch
+// another body's level set), in a deterministic order (edges sorted by vertex indices).
+Points surface_samples(const TriangleMesh& mesh, double max_spacing);
+
 // True when every edge is shared by exactly two triangles with opposite orientation
 bool is_closed(const TriangleMesh& mesh);
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,12 +24,14 @@ import numpy as np
 
 from . import _core
 from .errors import SceneError
+from .files import write_atomically
 from .scene import Body, Scene
 
 SPHERE_SUBDIVISIONS = 8  # 386 samples on a sphere, 0.5% faceting of the radius
 BOX_SUBDIVISIONS = 4     # 98 samples on a box: corners, edges and faces
 VOXELS_ACROSS = 64       # automatic voxel size: the longest extent over this ...
 MIN_VOXELS_THIN = 6      # ... but at least this many voxels across the thinnest extent
+MAX_VOXELS = 5e7         # a filled grid of 5e7 voxels takes ~0.75 GB
 CACHE_FORMAT = "levelset-v1"
 
 
@@ -101,22 +102,27 @@ def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: floa
     level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(suffix=".vdb.tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            level_set.write(tmp)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    except OSError:
+        write_atomically(path, level_set.write)
+    except (OSError, RuntimeError):
         pass  # a read-only cache costs a re-bake next time, nothing else
     return level_set
 
 
-def needs_level_set(scene: Scene) -> bool:
-    """A body's level set is needed only when another body or a cloth could touch it."""
-    return len(scene.bodies) + len(scene.cloths) > 1
+def needs_level_set(scene: Scene, index: int) -> bool:
+    """A body's level set is needed only when a cloth or another body could touch it
+    (two kinematic bodies never meet: neither can be pushed)."""
+    me = scene.bodies[index]
+    return bool(scene.cloths) or any(
+        j != index and not (me.kinematic and other.kinematic) for j, other in enumerate(scene.bodies))
+
+
+def check_voxel_count(vertices: np.ndarray, voxel_size: float, file: str | Path, key: str) -> None:
+    """Refuse a grid that would not fit: the interior is filled, so voxels grow as 1/h^3."""
+    extent = vertices.max(axis=0) - vertices.min(axis=0)
+    voxels = float(np.prod(extent / voxel_size + 6.0))
+    if voxels > MAX_VOXELS:
+        raise SceneError(file, key, f"voxel size {voxel_size:g} m needs ~{voxels:.2g} voxels for this mesh "
+                                    f"(at most {MAX_VOXELS:.0e}); use a larger voxel size")
 
 
 def load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> BodyAsset:
@@ -141,11 +147,11 @@ def load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bod
         level_set = None
         if with_level_set:
             voxel_size = body.voxel_size or automatic_voxel_size(vertices)
+            check_voxel_count(vertices, voxel_size, file, f"{key}.voxel_size")
             level_set = bake_level_set(vertices, triangles, voxel_size)
     normals = _core.vertex_normals(vertices, triangles)
     return BodyAsset(vertices, triangles, normals, props, level_set, voxel_size)
 
 
 def load_assets(scene: Scene) -> list[BodyAsset]:
-    touchable = needs_level_set(scene)
-    return [load_body(scene, i, body, touchable) for i, body in enumerate(scene.bodies)]
+    return [load_body(scene, i, body, needs_level_set(scene, i)) for i, body in enumerate(scene.bodies)]

@@ -12,13 +12,13 @@ status 2, no traceback and no output file. A failed check exits with status 1.
 from __future__ import annotations
 
 import argparse
-import os
+import math
 import sys
-import tempfile
 from pathlib import Path
 
 from . import __version__
 from .errors import SceneError, SimulationError
+from .files import check_output_path, write_atomically
 
 
 
@@ -49,9 +49,10 @@ def _progress(enabled: bool):
 
 def _bake(scene_path: str, output: str | None, quiet: bool) -> int:
     from .scene import load_scene
+
+    scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
     from .simulate import bake
 
-    scene = load_scene(scene_path)
     output = output or f"{Path(scene_path).stem}.usdc"
     bar, update = _progress(not quiet)
     try:
@@ -77,30 +78,24 @@ def _check(path: str) -> int:
 
 
 def _levelset(mesh: str, output: str, voxel_size: float | None) -> int:
-    from .assets import automatic_voxel_size, load_mesh
+    from .assets import automatic_voxel_size, check_voxel_count, load_mesh
 
     out = Path(output)
-    if out.suffix.lower() != ".vdb":
-        raise SceneError(output, "", "output must end in .vdb")
-    if not out.parent.is_dir():
-        raise SceneError(output, "", f"directory {out.parent} does not exist")
-    if voxel_size is not None and not voxel_size > 0:
-        raise SceneError(mesh, "--voxel-size", f"must be > 0, got {voxel_size}")
+    check_output_path(out, (".vdb",))
+    if voxel_size is not None and not (math.isfinite(voxel_size) and voxel_size > 0):
+        raise SceneError(mesh, "--voxel-size", f"must be a finite number > 0, got {voxel_size}")
     if not Path(mesh).is_file():
         raise SceneError(mesh, "", "no such file")
     from . import _core
 
     vertices, triangles = load_mesh(Path(mesh), mesh, "mesh")
     h = voxel_size or automatic_voxel_size(vertices)
-    grid = _core.LevelSet.bake(vertices, triangles, h)
-    fd, tmp = tempfile.mkstemp(suffix=".vdb.tmp", dir=out.parent)
-    os.close(fd)
+    check_voxel_count(vertices, h, mesh, "--voxel-size")
     try:
-        grid.write(tmp)
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        grid = _core.LevelSet.bake(vertices, triangles, h)
+    except ValueError as error:
+        raise SceneError(mesh, "--voxel-size", str(error)) from None
+    write_atomically(out, grid.write)
     print(f"baked {mesh}: voxel size {h:.6g} m, {grid.active_voxel_count} active voxels -> {out}")
     return 0
 

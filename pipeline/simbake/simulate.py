@@ -17,6 +17,7 @@ import numpy as np
 from . import _core, __version__
 from .assets import BodyAsset, load_assets
 from .errors import SceneError, SimulationError
+from .files import check_output_path
 from .scene import Scene
 from .usd_writer import BodyPrim, CacheWriter
 
@@ -54,13 +55,6 @@ def build_world(scene: Scene, assets: list[BodyAsset]) -> "_core.World":
     return world
 
 
-def _check_output(path: Path) -> None:
-    if path.suffix.lower() not in USD_SUFFIXES:
-        raise SceneError(path, "", f"output must end in {', '.join(USD_SUFFIXES)}")
-    if not path.parent.is_dir():
-        raise SceneError(path, "", f"directory {path.parent} does not exist")
-
-
 def _provenance(scene: Scene) -> dict:
     return {
         "simbake": {
@@ -79,7 +73,7 @@ def bake(scene: Scene, output: str | Path, *,
     on_frame(done, total) is called after each written frame (for progress bars).
     """
     output = Path(output)
-    _check_output(output)
+    check_output_path(output, USD_SUFFIXES)
     if scene.cloths:
         raise SceneError(scene.source, "cloths", "cloth simulation is not available in this version")
     start = time.perf_counter()

@@ -12,10 +12,12 @@ import fcntl
 import os
 import pty
 import re
+import select
 import struct
 import subprocess
 import sys
 import termios
+import time
 from pathlib import Path
 
 import numpy as np
@@ -116,8 +118,12 @@ def _bake_on_a_tty(args, cwd: Path) -> tuple[int, str]:
         proc = subprocess.Popen([sys.executable, "-m", "simbake", *args], cwd=cwd,
                                 stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL)
         os.close(slave)
-        chunks = []
-        while True:
+        chunks, deadline = [], time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline:
+            if not select.select([master], [], [], 1.0)[0]:
+                if proc.poll() is not None:
+                    break
+                continue
             try:
                 data = os.read(master, 4096)
             except OSError:  # EIO: the child closed its end
@@ -125,7 +131,7 @@ def _bake_on_a_tty(args, cwd: Path) -> tuple[int, str]:
             if not data:
                 break
             chunks.append(data)
-        status = proc.wait(timeout=TIMEOUT)
+        status = proc.wait(timeout=max(1.0, deadline - time.monotonic()))
     finally:
         os.close(master)
     return status, b"".join(chunks).decode(errors="replace")
@@ -153,14 +159,21 @@ def test_quiet_bake_prints_only_the_summary(write_scene, tmp_path):
     assert result.stdout.startswith("baked 12 frames")
 
 
-def test_default_output_is_scene_name_in_the_working_directory(write_scene, tmp_path):
+def test_default_output_is_scene_name_in_the_working_directory(write_scene, meshes, tmp_path):
     scenes, work = tmp_path / "scenes", tmp_path / "work"
     scenes.mkdir(), work.mkdir()
-    write_scene(DROP_SCENE, "scenes/drop.toml")
+    meshes["lshape"].rename(scenes / "lshape.obj")
+    # the mesh path is relative to the scene file, not to the working directory
+    write_scene(DROP_SCENE + """
+        [[bodies]]
+        name = "bracket"
+        mesh = "lshape.obj"
+        position = [0.0, 1.0, 1.0]
+    """, "scenes/drop.toml")
     result = simbake("bake", "../scenes/drop.toml", cwd=work)
     assert result.returncode == 0, result.stderr
-    assert listing(work) == ["drop.usdc"]          # in the cwd, named after the scene...
-    assert listing(scenes) == ["drop.toml"]        # ...not beside the scene file
+    assert listing(work) == ["drop.usdc"]                     # in the cwd, named after the scene...
+    assert listing(scenes) == ["drop.toml", "lshape.obj"]     # ...not beside the scene file
     assert (work / "drop.usdc").read_bytes().startswith(b"PXR-USDC")
     assert "drop.usdc" in result.stdout
 
@@ -239,20 +252,9 @@ def test_levelset_writes_a_readable_vdb(meshes, tmp_path):
     assert phi[1] > 0                        # the hole's centre is outside
 
 
-LEVELSET_BUGS = {
-    "inf-voxel": "BUG cli.py:_levelset checks `not voxel_size > 0`, which lets inf through; "
-                 "the core's ValueError escapes as a traceback with exit status 1",
-    "output-is-a-directory": "BUG cli.py:_levelset does not reject an output path that is an "
-                             "existing directory; os.replace raises IsADirectoryError, uncaught "
-                             "(traceback, exit status 1)",
-}
-
-
 @pytest.mark.parametrize("case", [
-    pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=LEVELSET_BUGS[c]))
-    if c in LEVELSET_BUGS else c
-    for c in ["zero-voxel", "negative-voxel", "nan-voxel", "inf-voxel", "missing-mesh",
-              "wrong-suffix", "open-mesh", "output-is-a-directory"]])
+    "zero-voxel", "negative-voxel", "nan-voxel", "inf-voxel", "tiny-voxel", "missing-mesh",
+    "wrong-suffix", "open-mesh", "output-is-a-directory"])
 def test_levelset_bad_input(meshes, tmp_path, case):
     (tmp_path / "open.obj").write_text(OPEN_BOX_OBJ)
     mesh, out, extra = "torus.obj", "t.vdb", []
@@ -265,6 +267,8 @@ def test_levelset_bad_input(meshes, tmp_path, case):
         extra, expect = ["--voxel-size", "nan"], "--voxel-size"
     elif case == "inf-voxel":
         extra, expect = ["--voxel-size", "inf"], "--voxel-size"
+    elif case == "tiny-voxel":  # 1e-4 m on a 0.8 m torus would fill ~8e9 voxels: refused at once
+        extra, expect = ["--voxel-size", "0.0001"], "--voxel-size"
     elif case == "missing-mesh":
         mesh, expect = "nope.obj", "nope.obj"
     elif case == "wrong-suffix":
@@ -320,17 +324,7 @@ BAD_INPUT = {
                               ["out.usdc", "directory"]),
 }
 
-KNOWN_BUGS = {
-    "output-is-a-directory": "BUG simulate.py:_check_output does not reject an output path that "
-                             "is an existing directory: the whole scene is simulated, then "
-                             "usd_writer.CacheWriter.close's os.replace raises IsADirectoryError, "
-                             "which cli.main does not catch (traceback, exit status 1)",
-}
-
-
-@pytest.mark.parametrize("case", [
-    pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_BUGS[c])) if c in KNOWN_BUGS
-    else c for c in BAD_INPUT])
+@pytest.mark.parametrize("case", list(BAD_INPUT))
 def test_bake_bad_input(write_scene, tmp_path, case):
     text, files, output, words = BAD_INPUT[case]
     write_scene(text)
@@ -412,10 +406,7 @@ def test_failed_bake_keeps_an_existing_file(write_scene, tmp_path, stage, suffix
 # files a user gets are readable by the studio, like any file a tool writes
 # --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("command", ["bake-usdc", pytest.param(
-    "levelset", marks=pytest.mark.xfail(strict=True, reason=(
-        "BUG cli.py:_levelset writes through tempfile.mkstemp (mode 0600) and os.replace keeps "
-        "that mode: the .vdb is unreadable to anyone else whatever the umask")))])
+@pytest.mark.parametrize("command", ["bake-usdc", "levelset"])
 def test_outputs_respect_the_umask(write_scene, meshes, tmp_path, command):
     write_scene(DROP_SCENE)
     if command == "levelset":

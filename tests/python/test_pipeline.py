@@ -295,6 +295,29 @@ def test_no_grid_for_a_body_nothing_can_touch(write_scene, meshes, tmp_path, sim
     assert ring[-1, 1] == pytest.approx(0.1, abs=0.01)
 
 
+def test_no_grid_for_kinematic_bodies_alone(write_scene, meshes, tmp_path, simbake_cache_dir):
+    scene_path = write_scene("""
+        [scene]
+        fps = 24
+        end_frame = 3
+        [ground]
+        [[bodies]]
+        name = "ring"
+        mesh = "torus.obj"
+        position = [0.0, 0.1, 0.0]
+        kinematic = true
+        [[bodies]]
+        name = "bracket"
+        mesh = "lshape.obj"
+        position = [0.0, 0.3, 0.0]
+        kinematic = true
+    """)
+    out = tmp_path / "out.usdc"
+    bake_file(scene_path, out)
+    assert out.is_file()
+    assert levelset_files(simbake_cache_dir) == {}
+
+
 # --------------------------------------------------------------------------------------------
 # physics through the whole pipeline, read back from the USD
 # --------------------------------------------------------------------------------------------
