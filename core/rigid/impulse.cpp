@@ -1,5 +1,6 @@
 #include "rigid/impulse.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace simbake {
@@ -31,11 +32,8 @@ Vec3 sliding_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitu
   if (vt_norm <= 1e-14 * (1.0 + v.norm())) return frictionless_impulse(K, n, v, restitution);
   const Vec3 direction = n - friction * (vt / vt_norm);
   const double denominator = n.dot(K * direction);
-  // n.K(n - mu T) can only vanish or turn negative for large mu on a long lever arm; then the
-  // sliding impulse would pull instead of push, and the frictionless one is the safe answer
   if (!(denominator > 1e-12 * n.dot(K * n))) return frictionless_impulse(K, n, v, restitution);
-  const double j = -(1.0 + restitution) * n.dot(v) / denominator;
-  return j * direction;
+  return (-(1.0 + restitution) * n.dot(v) / denominator) * direction;
 }
 
 Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitution, double friction) {
@@ -43,6 +41,32 @@ Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitu
   const Vec3 J = static_impulse(K, n, v, restitution);
   if (inside_friction_cone(J, n, friction)) return J;
   return sliding_impulse(K, n, v, restitution, friction);
+}
+
+Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction) {
+  // normal: push only
+  const double jn_old = total.dot(n);
+  const double jn = std::max(0.0, jn_old - v.dot(n) / n.dot(K * n));
+  Vec3 jt = total - jn_old * n;
+  if (friction <= 0.0 || jn == 0.0) return jn * n;
+  // friction along the slip, with the velocity the normal update leaves
+  const Vec3 v_after = v + K * ((jn - jn_old) * n);
+  const Vec3 slip = v_after - v_after.dot(n) * n;
+  const double slip_speed = slip.norm();
+  if (slip_speed > 0.0) {
+    const Vec3 T = slip / slip_speed;
+    jt -= (slip_speed / T.dot(K * T)) * T;
+  }
+  // onto the cone; when it binds, the magnitude is re-solved along the clamped direction D so
+  // that the normal condition holds exactly: J = j (n + mu D), n.(v_free + K J) = 0 (the
+  // notes' sliding impulse with -T = D)
+  const double limit = friction * jn, length = jt.norm();
+  if (length <= limit) return jn * n + jt;
+  const Vec3 direction = n + friction * (jt / length);
+  const double denominator = n.dot(K * direction);
+  const double j = -n.dot(v - K * total) / denominator;
+  if (denominator > 1e-12 * n.dot(K * n) && j > 0.0) return j * direction;
+  return jn * n + jt * (limit / length);
 }
 
 }  // namespace simbake

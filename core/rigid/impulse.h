@@ -26,11 +26,29 @@ Vec3 static_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitut
 bool inside_friction_cone(const Vec3& J, const Vec3& n, double friction);
 
 // Sliding friction: J = j (n - mu T), T = v_T / |v_T|, j = -(1 + e) n.v / (n.K (n - mu T)).
-// With v_T = 0 there is no friction direction and this is the frictionless impulse.
+// With v_T = 0 there is no friction direction and this is the frictionless impulse; so it is
+// when n.K(n - mu T) <= 0 (large mu on a long lever arm), where the sliding impulse would
+// pull instead of push.
 Vec3 sliding_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitution, double friction);
 
 // Coulomb friction as the notes prescribe: the static impulse if it lies in the friction
 // cone, else the sliding impulse on the cone. friction == 0 skips the friction math.
 Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitution, double friction);
+
+// One projected Gauss-Seidel update of a contact point's total impulse (the contact stage,
+// where many points share a load and are solved in turn until nothing changes).
+//   total: the impulse the point has given body 1 so far this stage (N s)
+//   v:     the point's relative velocity now, with that impulse in it
+// Normal part: j_n <- max(0, j_n - v.n / (n.K n)), the inelastic impulse along n that may
+// push but never pull. Friction part, with the velocity after the normal update: along the
+// slip direction T = v_T / |v_T|, j_T <- j_T - |v_T| / (T.K T) T, then projected radially
+// onto the cone |j_T| <= mu j_n. The fixed points are Coulomb's law: either no slip with the
+// impulse inside the cone (static friction), or slip with the friction on the cone exactly
+// against it (sliding, maximal dissipation). The notes' one-shot formulas (static impulse,
+// cone test, sliding impulse with T from the velocity before the impulse) solve the same law
+// for a single point; iterated over the points of a face they fan the friction out of line
+// with the rotational coupling of off-centre points (anisotropic K), and a box on a slope
+// creeps where it must stick. Returns the new total.
+Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction);
 
 }  // namespace simbake

@@ -178,22 +178,16 @@ bool World::apply_impulse(const Penetration& p, double restitution, double frict
   return true;
 }
 
-// Contact impulse at one contact point. The point's total impulse over the contact stage,
-// J_total, is the notes' inelastic Coulomb impulse (static if inside the cone, else sliding
-// on it) for the velocity the point would have without it, v_free = v - K J_total_old; zero
-// when v_free separates. Only the change is applied: projected Gauss-Seidel on the points'
-// total impulses. Testing the cone on the total rather than on each increment is what lets
-// a box on a slope stick: late sweeps make small corrections with almost no normal part.
+// Contact impulse at one contact point: one projected Gauss-Seidel update of the point's
+// total impulse this stage (see contact_impulse_update); only the change is applied.
 bool World::apply_contact_impulse(ContactPoint& contact) {
   const Penetration& p = contact.point;
   const Mat3 K = pair_impulse_matrix(p);
   const Vec3 v = point_velocity(p.a, p.x, Velocities::kAverage) - point_velocity(p.b, p.x, Velocities::kAverage);
-  const Vec3 v_free = v - K * contact.total;
-  const Vec3 wanted =
-      v_free.dot(p.n) < 0.0 ? coulomb_impulse(K, p.n, v_free, 0.0, contact.friction) : Vec3::Zero();
-  const Vec3 change = wanted - contact.total;
+  const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction);
+  const Vec3 change = total - contact.total;
   if ((K * change).norm() <= settings_.contact_tolerance) return false;
-  contact.total = wanted;
+  contact.total = total;
   exchange_impulse(p, change);
   return true;
 }

@@ -36,13 +36,14 @@ std::vector<double> bounce_apexes(double drop_height, double restitution, int su
 // Box of 0.5 m on a ground under gravity tilted by `angle` about z; returns the distance
 // slid along -x (downhill) after `seconds`, and the tipping of the box (rad)
 struct Slide { double distance, velocity, tilt; };
-Slide slide_box(double angle, double friction, double seconds, const Vec3& v0 = Vec3::Zero()) {
+Slide slide_box(double angle, double friction, double seconds, const Vec3& v0 = Vec3::Zero(),
+                int samples_per_edge = 4) {
   WorldSettings settings;
   const double g = 9.81;
   settings.gravity = Vec3(-g * std::sin(angle), -g * std::cos(angle), 0.0);
   World world(settings);
   world.set_ground(GroundDef{0.0, friction, 0.0});
-  BodyDesc box = box_body(Vec3::Constant(0.5), 10.0, Vec3(0.0, 0.25, 0.0));
+  BodyDesc box = box_body(Vec3::Constant(0.5), 10.0, Vec3(0.0, 0.25, 0.0), samples_per_edge);
   box.friction = friction;
   box.linear_velocity = v0;
   world.add_body(box);
@@ -95,11 +96,15 @@ TEST(World, BoxSlidesAtTheCoulombRate) {
   EXPECT_LT(slide.tilt, 0.01);  // slides flat, does not tip or rock
 }
 
+// with corners only and with samples on the edges and faces as the pipeline places them
 TEST(World, BoxSticksWhenFrictionExceedsTheSlope) {
   const double angle = 30.0 * M_PI / 180.0;  // tan = 0.577
-  const Slide slide = slide_box(angle, 0.7, 3.0);
-  EXPECT_LT(std::abs(slide.distance), 1e-3);
-  EXPECT_LT(std::abs(slide.velocity), 1e-3);
+  for (int samples_per_edge : {1, 2, 4}) {
+    const Slide slide = slide_box(angle, 0.7, 3.0, Vec3::Zero(), samples_per_edge);
+    EXPECT_LT(std::abs(slide.distance), 1e-4) << samples_per_edge;
+    EXPECT_LT(std::abs(slide.velocity), 1e-4) << samples_per_edge;
+    EXPECT_LT(slide.tilt, 1e-3) << samples_per_edge;
+  }
 }
 
 TEST(World, MovingBoxStopsWhereFrictionSaysOnFlatGround) {
