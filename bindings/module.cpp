@@ -202,6 +202,7 @@ PYBIND11_MODULE(_core, m) {
              d["collisions"] = p.collisions;
              d["velocities"] = p.velocities;
              d["contacts"] = p.contacts;
+             d["shock_propagation"] = p.shock_propagation;
              d["positions"] = p.positions;
              d["statistics"] = p.statistics;
              return d;

@@ -104,6 +104,11 @@ int World::add_body(const BodyDesc& desc) {
   spin_.push_back(spin);
   candidates_.push_back(state);
   candidate_poses_.push_back(mesh_pose(defs_.back(), state));
+  omega_.push_back(Vec3::Zero());
+  inverse_inertia_.push_back(Mat3::Zero());
+  stale_.push_back(0);
+  frozen_.push_back(0);
+  level_.push_back(-1);
   return body_count() - 1;
 }
 
@@ -145,6 +150,7 @@ void World::step(double dt) {
   { ScopedTimer timer(profile_.collisions); resolve_collisions(dt); }
   { ScopedTimer timer(profile_.velocities); update_velocities(dt); }
   { ScopedTimer timer(profile_.contacts); resolve_contacts(dt); }
+  { ScopedTimer timer(profile_.shock_propagation); propagate_shocks(); }
   { ScopedTimer timer(profile_.positions); update_positions(dt); }
   ++stats_.substeps;
 }

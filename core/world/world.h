@@ -8,7 +8,9 @@
 //   update_velocities  gravity
 //   resolve_contacts   inelastic impulses at every penetrating point, with average
 //                      velocities defined exactly as update_positions moves the bodies; each
-//                      point's total impulse over the stage obeys the Coulomb cone
+//                      point's total impulse over the stage obeys the Coulomb cone; then
+//                      shock propagation: the contact graph solved level by level from the
+//                      ground up, each level resting on the frozen levels below
 //   update_positions   x += dt v; q by the torque-free rotation with L fixed
 // Statistics (energy, penetration, substeps) are gathered once per frame.
 #pragma once
@@ -26,7 +28,8 @@ namespace simbake {
 struct WorldSettings {
   Vec3 gravity = Vec3(0.0, -9.81, 0.0);  // (m/s^2)
   int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
-  int contact_sweeps = 20;               // inelastic sweeps over all pairs (at most)
+  int contact_sweeps = 10;               // inelastic sweeps over all pairs (at most)
+  int shock_sweeps = 20;                 // sweeps per level of shock propagation (at most)
   double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
                                          // changes a point velocity by more than this
   double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
@@ -72,6 +75,7 @@ struct StageProfile {
   double collisions = 0.0;
   double velocities = 0.0;
   double contacts = 0.0;
+  double shock_propagation = 0.0;
   double positions = 0.0;
   double statistics = 0.0;
 };
@@ -124,28 +128,30 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
-  enum class Velocities { kStartOfStep, kAverage };
-
   // stages
   void broad_phase(double dt);
   void resolve_collisions(double dt);
   void update_velocities(double dt);
   void resolve_contacts(double dt);
+  void propagate_shocks();
   void update_positions(double dt);
   void gather_statistics();
 
   // helpers of the stages
+  bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
+  void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
   void update_candidate(int i);
-  void update_all_candidates(double dt, bool with_forces);
-  Vec3 point_velocity(int i, const Vec3& x, Velocities mode) const;
-  void find_penetrations(int a, int b, Velocities mode, bool only_approaching,
-                         std::vector<Penetration>& out) const;
+  void refresh_stale_candidates();
+  Vec3 point_velocity(int i, const Vec3& x) const;
+  void find_penetrations(int a, int b, bool only_approaching, std::vector<Penetration>& out) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J);
-  bool apply_impulse(const Penetration& p, double restitution, double friction, Velocities mode);
+  bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
   void find_new_contacts();
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact);
+  void assign_contact_levels();
+  static std::uint64_t contact_key(const Penetration& p);  // (a, b, sample) packed
   bool check_finite() const;
 
   WorldSettings settings_;
@@ -155,12 +161,20 @@ class World {
   std::vector<Vec3> spin_;                  // (nbody) prescribed angular velocity of kinematic bodies (rad/s)
   std::vector<RigidBodyState> candidates_;  // (nbody) candidate end-of-step states
   std::vector<Pose> candidate_poses_;       // (nbody) mesh poses of the candidates
+  std::vector<Vec3> omega_;                 // (nbody) angular velocity the current impulse
+                                            // stage uses at points (rad/s, world)
+  std::vector<Mat3> inverse_inertia_;       // (nbody) world I^-1 at the start-of-step orientation
+  std::vector<char> stale_;                 // (nbody) candidate behind the latest impulse
+  std::vector<char> frozen_;                // (nbody) immovable for now (shock propagation)
+  std::vector<int> level_;                  // (nbody) contact-graph distance from the ground or
+                                            // a kinematic body; -1 when not connected
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<Penetration> scratch_;        // reused by the impulse stages
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::unordered_set<std::uint64_t> contact_keys_;  // (a, b, sample) of contacts_
   double dt_ = 0.0;                         // current substep (s)
-  bool candidates_with_forces_ = false;
+  bool candidates_with_forces_ = false;     // collision stage: candidates include gravity
+  bool average_velocities_ = false;         // contact stage: omega_ is the average velocity
   StepStatistics stats_;
   StageProfile profile_;
 };
