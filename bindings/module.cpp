@@ -204,6 +204,7 @@ PYBIND11_MODULE(_core, m) {
              d["contacts"] = p.contacts;
              d["shock_propagation"] = p.shock_propagation;
              d["positions"] = p.positions;
+             d["sleeping"] = p.sleeping;
              d["statistics"] = p.statistics;
              return d;
            });

@@ -28,51 +28,6 @@
 
 namespace simbake {
 
-namespace {
-
-double combine_friction(double a, double b) { return std::sqrt(a * b); }
-double combine_restitution(double a, double b) { return std::max(a, b); }
-
-// Box around a body's bounding sphere at both ends of a straight move, grown by `margin`
-Box3 swept_box(const Vec3& from, const Vec3& to, double radius, double margin) {
-  Box3 box(from.cwiseMin(to), from.cwiseMax(to));
-  box.min().array() -= radius + margin;
-  box.max().array() += radius + margin;
-  return box;
-}
-
-}  // namespace
-
-// ---------------------------------------------------------------------------------------
-// Broad phase: keep only pairs whose boxes over the step overlap. The box of a body holds
-// its bounding sphere at the start and at the forced candidate, plus a margin for what
-// impulses may add during the step.
-
-void World::broad_phase(double dt) {
-  pairs_.clear();
-  const int n = body_count();
-  std::vector<Box3> boxes(n);
-  for (int i = 0; i < n; ++i) {
-    const RigidBodyState& s = states_[i];
-    const Vec3 gravity = defs_[i].kinematic ? Vec3::Zero() : settings_.gravity;
-    const Vec3 to = s.x + dt * (s.v + dt * gravity);
-    const double margin = 0.5 * dt * (s.v.norm() + dt * gravity.norm()) + 1e-4;
-    boxes[i] = swept_box(s.x, to, defs_[i].bounding_radius, margin);
-  }
-  for (int a = 0; a < n; ++a) {
-    if (ground_ && !defs_[a].kinematic && boxes[a].min().y() <= ground_->height) {
-      pairs_.push_back({a, kGround, combine_friction(defs_[a].friction, ground_->friction),
-                        combine_restitution(defs_[a].restitution, ground_->restitution)});
-    }
-    for (int b = a + 1; b < n; ++b) {
-      if (defs_[a].kinematic && defs_[b].kinematic) continue;
-      if (!boxes[a].intersects(boxes[b])) continue;
-      pairs_.push_back({a, b, combine_friction(defs_[a].friction, defs_[b].friction),
-                        combine_restitution(defs_[a].restitution, defs_[b].restitution)});
-    }
-  }
-}
-
 // ---------------------------------------------------------------------------------------
 // Candidates and point velocities
 
@@ -81,6 +36,7 @@ void World::begin_impulse_stage(double dt, bool with_forces, bool average_veloci
   candidates_with_forces_ = with_forces;
   average_velocities_ = average_velocities;
   for (int i = 0; i < body_count(); ++i) {
+    if (asleep_[i]) continue;
     const RigidBodyDef& def = defs_[i];
     inverse_inertia_[i] = def.kinematic ? Mat3::Zero() : world_inverse_inertia(def, states_[i].q);
     if (def.kinematic) omega_[i] = spin_[i];
@@ -106,6 +62,7 @@ void World::update_candidate(int i) {
   }
   candidate_poses_[i] = mesh_pose(def, c);
   stale_[i] = 0;
+  ++version_[i];
 }
 
 void World::refresh_stale_candidates() {
@@ -127,26 +84,41 @@ void World::find_penetrations(int a, int b, bool only_approaching, std::vector<P
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
   const Pose& pose_a = candidate_poses_[a];
   const Points& samples = defs_[a].samples;
+  // cull in a's mesh frame: only samples within b's bounding sphere (or below the ground
+  // plane) can be inside b, and that test costs a fraction of the full one
+  Vec3 centre_in_a = Vec3::Zero(), down_in_a = Vec3::Zero();
+  double reach = 0.0, ground_offset = 0.0;
   Box3 local_bounds;
-  if (b != kGround) local_bounds = defs_[b].shape->bounds();
+  if (b == kGround) {
+    down_in_a = pose_a.rotation.transpose() * Vec3::UnitY();  // world y of a mesh point m: m.down + t.y
+    ground_offset = pose_a.translation.y() - ground_->height;
+  } else {
+    centre_in_a = pose_a.apply_inverse(candidates_[b].x);
+    reach = defs_[b].bounding_radius * defs_[b].bounding_radius;
+    local_bounds = defs_[b].shape->bounds();
+  }
   for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-    const Vec3 x = pose_a.apply(samples.row(s).transpose());
+    const Vec3 m = samples.row(s).transpose();
     double phi;
     Vec3 n;
     if (b == kGround) {
-      phi = x.y() - ground_->height;
+      phi = m.dot(down_in_a) + ground_offset;
       if (phi >= 0.0) continue;
       n = Vec3::UnitY();
     } else {
+      if ((m - centre_in_a).squaredNorm() > reach) continue;
       const Pose& pose_b = candidate_poses_[b];
-      const Vec3 p = pose_b.apply_inverse(x);
+      const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
       if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
       Vec3 n_local;
       phi = defs_[b].shape->phi_and_normal(p, n_local);
       if (phi >= 0.0) continue;
       n = pose_b.rotation * n_local;
     }
-    if (only_approaching && (point_velocity(a, x) - point_velocity(b, x)).dot(n) >= 0.0) continue;
+    const Vec3 x = pose_a.apply(m);
+    // approaching faster than the contact solver's tolerance: slower is resting contact
+    if (only_approaching &&
+        (point_velocity(a, x) - point_velocity(b, x)).dot(n) >= -settings_.contact_tolerance) continue;
     out.push_back({a, b, x, n, phi, static_cast<int>(s)});
   }
 }
@@ -173,6 +145,7 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
       states_[i].l += dl;
       omega_[i] += inverse_inertia_[i] * dl;
       stale_[i] = 1;
+      ++version_[i];
     }
     sign = -1.0;
   }
@@ -188,7 +161,7 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
 
 bool World::apply_collision_impulse(const Penetration& p, double restitution, double friction) {
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
-  if (v.dot(p.n) >= 0.0) return false;
+  if (v.dot(p.n) >= -settings_.contact_tolerance) return false;
   exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction));
   refresh_stale_candidates();
   return true;
@@ -213,19 +186,28 @@ void World::resolve_collisions(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/true, /*average_velocities=*/false);
   std::vector<int> order(pairs_.size());
   std::vector<Penetration>& found = scratch_;
+  // sweep in which each body last took an impulse: after the first sweep only pairs with a
+  // body that changed since the pair was last looked at can have anything new to offer
+  std::vector<int>& changed = body_scratch_;
+  changed.assign(body_count(), -1);
+  auto changed_since = [&](int i, int sweep) { return i != kGround && changed[i] >= sweep - 1; };
   for (int sweep = 0; sweep < settings_.collision_sweeps; ++sweep) {
     for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
     deterministic_shuffle(order, static_cast<std::uint64_t>(stats_.substeps) * 64 + sweep);
     bool any = false;
     for (int index : order) {
       const BodyPair& pair = pairs_[index];
+      if (sweep > 0 && !changed_since(pair.a, sweep) && !changed_since(pair.b, sweep)) continue;
       found.clear();
       find_penetrations(pair.a, pair.b, true, found);
       if (pair.b != kGround) find_penetrations(pair.b, pair.a, true, found);
       if (found.empty()) continue;
       const auto deepest = std::min_element(found.begin(), found.end(),
           [](const Penetration& l, const Penetration& r) { return l.phi < r.phi; });
-      any |= apply_collision_impulse(*deepest, pair.restitution, pair.friction);
+      if (!apply_collision_impulse(*deepest, pair.restitution, pair.friction)) continue;
+      any = true;
+      changed[pair.a] = sweep;
+      if (pair.b != kGround) changed[pair.b] = sweep;
     }
     if (!any) break;
   }
@@ -234,33 +216,30 @@ void World::resolve_collisions(double dt) {
 // Velocities: gravity on every dynamic body (no torque: it acts at the centre of mass)
 void World::update_velocities(double dt) {
   for (int i = 0; i < body_count(); ++i) {
-    if (!defs_[i].kinematic) states_[i].v += dt * settings_.gravity;
+    if (!defs_[i].kinematic && !asleep_[i]) states_[i].v += dt * settings_.gravity;
   }
 }
 
 // ---------------------------------------------------------------------------------------
-// Contacts (inelastic): every sample that penetrates at the candidates becomes a contact
-// point for the rest of the stage (deepest first within a pair); each sweep re-evaluates
-// every contact at the bodies' current candidates with average velocities, until no
-// impulse changes anything.
+// Contacts (inelastic): every sample that penetrates at the candidates when the stage begins
+// becomes a contact point for the whole stage (deepest first within a pair); each sweep
+// re-evaluates every contact at the bodies' current candidates with average velocities,
+// until no impulse changes anything. (Points that only start to penetrate during the
+// sweeps are left to the next step's collision stage, which catches them with forces.)
 
 void World::resolve_contacts(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/false, /*average_velocities=*/true);
-  contacts_.clear();
-  contact_keys_.clear();
+  find_contacts();
   for (int sweep = 0; sweep < settings_.contact_sweeps; ++sweep) {
     refresh_stale_candidates();
-    find_new_contacts();
     bool any = false;
-    for (ContactPoint& contact : contacts_) {
-      refresh_contact(contact.point);
-      any |= apply_contact_impulse(contact);
-    }
+    for (ContactPoint& contact : contacts_) any |= apply_contact_impulse(contact);
     if (!any) break;
   }
 }
 
-void World::find_new_contacts() {
+void World::find_contacts() {
+  contacts_.clear();
   for (const BodyPair& pair : pairs_) {
     scratch_.clear();
     find_penetrations(pair.a, pair.b, false, scratch_);
@@ -268,15 +247,16 @@ void World::find_new_contacts() {
     std::stable_sort(scratch_.begin(), scratch_.end(),
                      [](const Penetration& l, const Penetration& r) { return l.phi < r.phi; });
     for (const Penetration& p : scratch_) {
-      const std::uint64_t key = contact_key(p);
-      if (!contact_keys_.insert(key).second) continue;
-      contacts_.push_back({p, pair.friction});
+      ContactPoint contact{p, pair.friction};
+      if (p.a != kGround && !defs_[p.a].kinematic) {
+        contact.k_a = impulse_matrix(defs_[p.a].inverse_mass, inverse_inertia_[p.a], p.x - candidates_[p.a].x);
+      }
+      if (p.b != kGround && !defs_[p.b].kinematic) {
+        contact.k_b = impulse_matrix(defs_[p.b].inverse_mass, inverse_inertia_[p.b], p.x - candidates_[p.b].x);
+      }
+      contacts_.push_back(contact);
     }
   }
-}
-
-std::uint64_t World::contact_key(const Penetration& p) {
-  return (std::uint64_t(p.a + 1) << 43) | (std::uint64_t(p.b + 1) << 22) | std::uint64_t(p.sample);
 }
 
 // Moves a contact's sample with its body's candidate and takes b's normal there
@@ -294,17 +274,29 @@ void World::refresh_contact(Penetration& p) const {
 }
 
 // Contact impulse at one contact point: one projected Gauss-Seidel update of the point's
-// total impulse this stage (see contact_impulse_update); only the change is applied.
+// total impulse this stage (see contact_impulse_update); only the change is applied. A point
+// whose bodies have not changed since it was last evaluated is skipped: the update would
+// give the same answer, so converged parts of a pile cost nothing more.
 bool World::apply_contact_impulse(ContactPoint& contact) {
-  const Penetration& p = contact.point;
-  if (!movable(p.a) && !movable(p.b)) return false;
-  const Mat3 K = pair_impulse_matrix(p);
+  Penetration& p = contact.point;
+  const bool a_moves = movable(p.a), b_moves = movable(p.b);
+  if (!a_moves && !b_moves) return false;
+  const std::uint64_t va = p.a == kGround ? 0 : version_[p.a], vb = p.b == kGround ? 0 : version_[p.b];
+  if (va == contact.seen_a && vb == contact.seen_b) return false;
+  refresh_contact(p);
+  const Mat3 K = (a_moves ? contact.k_a : Mat3::Zero()) + (b_moves ? contact.k_b : Mat3::Zero());
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
   const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction);
   const Vec3 change = total - contact.total;
-  if ((K * change).norm() <= settings_.contact_tolerance) return false;
+  if ((K * change).norm() <= settings_.contact_tolerance) {
+    contact.seen_a = va;
+    contact.seen_b = vb;
+    return false;
+  }
   contact.total = total;
   exchange_impulse(p, change);
+  contact.seen_a = p.a == kGround ? 0 : version_[p.a];
+  contact.seen_b = p.b == kGround ? 0 : version_[p.b];
   return true;
 }
 
@@ -345,31 +337,39 @@ void World::assign_contact_levels() {
 void World::propagate_shocks() {
   if (contacts_.empty()) return;
   assign_contact_levels();
-  const int top = *std::max_element(level_.begin(), level_.end());
-  // the ground and kinematic bodies sit below level 0; unconnected bodies above every level
-  auto level_of = [&](int i) {
-    if (i == kGround || defs_[i].kinematic) return -1;
-    return level_[i] >= 0 ? level_[i] : std::numeric_limits<int>::max();
-  };
-  for (int level = 0; level <= top; ++level) {
+  // the ground and kinematic bodies sit below level 0; bodies connected to neither
+  // (level -1) keep the result of the sweeps
+  auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
+  std::vector<std::vector<int>> by_level;  // contacts by the level of their upper body
+  for (std::size_t k = 0; k < contacts_.size(); ++k) {
+    const int a = contacts_[k].point.a, b = contacts_[k].point.b;
+    if ((!fixed(a) && level_[a] < 0) || (!fixed(b) && level_[b] < 0)) continue;
+    const int level = std::max(fixed(a) ? -1 : level_[a], fixed(b) ? -1 : level_[b]);
+    if (level < 0) continue;
+    if (level >= static_cast<int>(by_level.size())) by_level.resize(level + 1);
+    by_level[level].push_back(static_cast<int>(k));
+  }
+  for (std::size_t level = 0; level < by_level.size(); ++level) {
     for (int sweep = 0; sweep < settings_.shock_sweeps; ++sweep) {
       refresh_stale_candidates();
       bool any = false;
-      for (ContactPoint& contact : contacts_) {
-        if (std::max(level_of(contact.point.a), level_of(contact.point.b)) != level) continue;
-        refresh_contact(contact.point);
-        any |= apply_contact_impulse(contact);
-      }
+      for (int k : by_level[level]) any |= apply_contact_impulse(contacts_[k]);
       if (!any) break;
     }
+    // freezing changes the K of every contact of the body: its version changes too
     for (int i = 0; i < body_count(); ++i) {
-      if (level_[i] == level) frozen_[i] = 1;
+      if (level_[i] == static_cast<int>(level)) {
+        frozen_[i] = 1;
+        ++version_[i];
+      }
     }
+  }
+  for (int i = 0; i < body_count(); ++i) {
+    if (frozen_[i]) ++version_[i];
   }
   std::fill(frozen_.begin(), frozen_.end(), 0);
   refresh_stale_candidates();
 }
-
 
 // Positions: x += dt v and the torque-free rotation with the final L (what the contact
 // stage's average velocities assumed)
@@ -378,6 +378,7 @@ void World::update_positions(double dt) {
   candidates_with_forces_ = false;
   average_velocities_ = false;
   for (int i = 0; i < body_count(); ++i) {
+    if (asleep_[i]) continue;
     update_candidate(i);
     states_[i].x = candidates_[i].x;
     states_[i].q = candidates_[i].q;

@@ -107,8 +107,14 @@ int World::add_body(const BodyDesc& desc) {
   omega_.push_back(Vec3::Zero());
   inverse_inertia_.push_back(Mat3::Zero());
   stale_.push_back(0);
+  version_.push_back(0);
   frozen_.push_back(0);
   level_.push_back(-1);
+  boxes_.emplace_back();
+  asleep_.push_back(0);
+  rest_time_.push_back(0.0);
+  rest_pose_.push_back(state);
+  island_.push_back(body_count() - 1);
   return body_count() - 1;
 }
 
@@ -118,6 +124,7 @@ int World::automatic_substeps(double frame_dt) const {
   // point plus what gravity adds in one frame.
   double steps = std::ceil(frame_dt / settings_.max_substep);
   for (int i = 0; i < body_count(); ++i) {
+    if (asleep_[i]) continue;
     const RigidBodyDef& def = defs_[i];
     const Vec3 omega = def.kinematic ? spin_[i] : angular_velocity(def, states_[i]);
     double speed = states_[i].v.norm() + omega.norm() * def.bounding_radius;
@@ -152,6 +159,7 @@ void World::step(double dt) {
   { ScopedTimer timer(profile_.contacts); resolve_contacts(dt); }
   { ScopedTimer timer(profile_.shock_propagation); propagate_shocks(); }
   { ScopedTimer timer(profile_.positions); update_positions(dt); }
+  { ScopedTimer timer(profile_.sleeping); update_sleeping(dt); }
   ++stats_.substeps;
 }
 
@@ -175,19 +183,24 @@ void World::gather_statistics() {
 }
 
 double World::max_penetration() const {
+  // the pairs the last broad phase kept are the only ones that can touch (the boxes hold
+  // the whole step); every sample is tested in both directions at the current poses
   double deepest = 0.0;
-  for (int a = 0; a < body_count(); ++a) {
-    const Pose pose_a = mesh_pose(defs_[a], states_[a]);
-    const Points& samples = defs_[a].samples;
-    for (int b = kGround; b < body_count(); ++b) {
-      if (b == a || (b == kGround && !ground_)) continue;
-      if (b != kGround && ((defs_[a].kinematic && defs_[b].kinematic) || !defs_[b].shape)) continue;
+  for (const BodyPair& pair : pairs_) {
+    for (const auto& [a, b] : {std::pair{pair.a, pair.b}, std::pair{pair.b, pair.a}}) {
+      if (a == kGround || (b != kGround && !defs_[b].shape)) continue;
+      const Pose pose_a = mesh_pose(defs_[a], states_[a]);
       const Pose pose_b = b == kGround ? Pose() : mesh_pose(defs_[b], states_[b]);
+      const Box3 bounds = b == kGround ? Box3() : defs_[b].shape->bounds();
+      const Points& samples = defs_[a].samples;
       for (Eigen::Index s = 0; s < samples.rows(); ++s) {
         const Vec3 x = pose_a.apply(samples.row(s).transpose());
-        const double phi = b == kGround ? x.y() - ground_->height
-                                        : defs_[b].shape->phi(pose_b.apply_inverse(x));
-        deepest = std::max(deepest, -phi);
+        if (b == kGround) {
+          deepest = std::max(deepest, ground_->height - x.y());
+          continue;
+        }
+        const Vec3 p = pose_b.apply_inverse(x);
+        if (bounds.contains(p)) deepest = std::max(deepest, -defs_[b].shape->phi(p));
       }
     }
   }

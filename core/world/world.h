@@ -20,7 +20,6 @@
 
 #include <cstdint>
 #include <optional>
-#include <unordered_set>
 #include <vector>
 
 namespace simbake {
@@ -30,6 +29,9 @@ struct WorldSettings {
   int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
   int contact_sweeps = 10;               // inelastic sweeps over all pairs (at most)
   int shock_sweeps = 20;                 // sweeps per level of shock propagation (at most)
+  double sleep_speed = 0.01;             // (m/s) a body whose points stray less than
+  double sleep_time = 0.5;               // (s) sleep_speed * sleep_time / 2 for sleep_time
+                                         // may sleep; sleep_time 0 disables sleeping
   double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
                                          // changes a point velocity by more than this
   double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
@@ -77,6 +79,7 @@ struct StageProfile {
   double contacts = 0.0;
   double shock_propagation = 0.0;
   double positions = 0.0;
+  double sleeping = 0.0;
   double statistics = 0.0;
 };
 
@@ -106,6 +109,9 @@ class World {
   const StageProfile& profile() const { return profile_; }
   // Deepest penetration of any sample into another body or the ground, now (m, >= 0)
   double max_penetration() const;
+  bool asleep(int i) const { return asleep_[i] != 0; }
+  double rest_time(int i) const { return rest_time_[i]; }  // (s) resting so far
+  int sleeping_count() const;
 
  private:
   static constexpr int kGround = -1;
@@ -118,11 +124,15 @@ class World {
     double phi;  // b's signed distance at x (m), negative
     int sample;  // index of the sample in a's samples
   };
-  // A contact of the contact stage: once found it stays for the whole stage
+  // A contact point of the contact stage, found when the stage begins
   struct ContactPoint {
     Penetration point;
     double friction;
-    Vec3 total = Vec3::Zero();  // impulse given to body a so far this stage (N s)
+    Vec3 total = Vec3::Zero();      // impulse given to body a so far this stage (N s)
+    Mat3 k_a = Mat3::Zero();        // K of body a and of body b at the point, from the
+    Mat3 k_b = Mat3::Zero();        // lever arms when found (they move < 1 mm in a step)
+    std::uint64_t seen_a = ~0ull;   // versions of a and b when last evaluated: while both
+    std::uint64_t seen_b = ~0ull;   // stay the same, evaluating again would change nothing
   };
   struct BodyPair {
     int a, b;  // b may be kGround
@@ -130,6 +140,7 @@ class World {
   };
   // stages
   void broad_phase(double dt);
+  void update_sleeping(double dt);
   void resolve_collisions(double dt);
   void update_velocities(double dt);
   void resolve_contacts(double dt);
@@ -139,6 +150,11 @@ class World {
 
   // helpers of the stages
   bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
+  bool moving_kinematic(int i) const;
+  void compute_boxes(double dt);
+  void overlapping_pairs(std::vector<std::pair<int, int>>& out) const;
+  int find_island(int i);
+  void wake_island(int i);
   void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
   void update_candidate(int i);
   void refresh_stale_candidates();
@@ -147,11 +163,10 @@ class World {
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
-  void find_new_contacts();
+  void find_contacts();
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact);
   void assign_contact_levels();
-  static std::uint64_t contact_key(const Penetration& p);  // (a, b, sample) packed
   bool check_finite() const;
 
   WorldSettings settings_;
@@ -165,13 +180,20 @@ class World {
                                             // stage uses at points (rad/s, world)
   std::vector<Mat3> inverse_inertia_;       // (nbody) world I^-1 at the start-of-step orientation
   std::vector<char> stale_;                 // (nbody) candidate behind the latest impulse
+  std::vector<std::uint64_t> version_;      // (nbody) bumped whenever v, L or the candidate change
   std::vector<char> frozen_;                // (nbody) immovable for now (shock propagation)
   std::vector<int> level_;                  // (nbody) contact-graph distance from the ground or
                                             // a kinematic body; -1 when not connected
+  std::vector<Box3> boxes_;                 // (nbody) broad-phase box over the step (m)
+  std::vector<std::pair<int, int>> overlap_scratch_;  // overlapping boxes this step
+  std::vector<char> asleep_;                // (nbody) sleeping: skipped by every stage
+  std::vector<double> rest_time_;           // (nbody) time spent resting so far (s)
+  std::vector<RigidBodyState> rest_pose_;   // (nbody) where the current rest began
+  std::vector<int> island_;                 // (nbody) union-find parent; for sleepers, their island
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<Penetration> scratch_;        // reused by the impulse stages
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
-  std::unordered_set<std::uint64_t> contact_keys_;  // (a, b, sample) of contacts_
+  std::vector<int> body_scratch_;           // (nbody) reused by the stages
   double dt_ = 0.0;                         // current substep (s)
   bool candidates_with_forces_ = false;     // collision stage: candidates include gravity
   bool average_velocities_ = false;         // contact stage: omega_ is the average velocity

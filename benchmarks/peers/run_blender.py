@@ -1,0 +1,154 @@
+"""Blender's rigid body world (bpy, Bullet inside) on one peer-benchmark scene; one JSON line.
+
+    benchmarks/peers/.venv-bpy/bin/python benchmarks/peers/run_blender.py SCENE [--seconds S]
+        [--substeps N]
+
+Settings (bpy 5.0.1 from PyPI, factory settings, Z up: scenes are converted from Y up):
+- 24 fps, time scale 1, solver iterations 10 (default), split impulse off (default),
+  substeps per frame 10 (default, 240 Hz) in every scene. The sphere's rebound depends
+  erratically on the substeps (Bullet drops the restitution of a contact that has existed for
+  more than a couple of steps, and its 0.04 m contact margin makes contacts appear before
+  impact when the steps are short): compare.py also runs the drop at 20, 40 and 100 substeps
+  (--substeps) and reports them beside the default;
+- Bullet multiplies the friction and restitution of a pair, so every object (and the ground)
+  gets sqrt(mu) and sqrt(e);
+- linear and angular damping 0 (Blender's defaults 0.04 and 0.1 damp every body, which
+  slows the sliding box and the falling sphere; --default-damping keeps them, and
+  compare.py also runs the tower and the pyramid that way);
+- collision shapes BOX and SPHERE (the default is CONVEX_HULL), collision margin left at
+  Blender's default (0.04 m, which Bullet keeps inside box and sphere shapes);
+- deactivation off (default); the ground is a passive 200 x 200 x 2 m box, top at the
+  ground height.
+Only scene.frame_set (which steps the rigid body world, and evaluates the depsgraph as
+Blender always does) is timed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import scenes  # noqa: E402
+
+import bpy  # noqa: E402  (first: bmesh and mathutils come with it)
+import bmesh  # noqa: E402
+from mathutils import Matrix  # noqa: E402
+
+DEFAULT_SUBSTEPS = 10
+
+
+def make_mesh(name: str, shape: str, size) -> "bpy.types.Mesh":
+    me = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    if shape == "box":
+        bmesh.ops.create_cube(bm, size=1.0, matrix=Matrix.Diagonal((size[0], size[1], size[2], 1.0)))
+    else:   # 32 x 16 keeps vertices on the poles and the equator: bounds are exactly 2 r
+        bmesh.ops.create_uvsphere(bm, u_segments=32, v_segments=16, radius=size[0])
+    bm.to_mesh(me)
+    bm.free()
+    return me
+
+
+def build(scene: scenes.Scene, substeps: int, damping: bool = False):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = scenes.FPS, 1.0
+    sc.use_gravity = True
+    sc.gravity = scenes.vec_to_zup(scene.gravity)
+    bpy.ops.rigidbody.world_add()
+    rbw = sc.rigidbody_world
+    rbw.substeps_per_frame = substeps
+    rbw.time_scale = 1.0
+    sc.frame_start, sc.frame_end = 1, scene.frames + 1
+    rbw.point_cache.frame_start, rbw.point_cache.frame_end = 1, scene.frames + 1
+
+    mu = scenes.per_object(scene.mu, "product")
+    e = scenes.per_object(scene.e, "product") if scene.e > 0 else 0.0
+    ground = bpy.data.objects.new("ground", make_mesh("ground", "box", (200.0, 200.0, 2.0)))
+    sc.collection.objects.link(ground)
+    ground.location = (0.0, 0.0, scene.ground_height - 1.0)
+
+    meshes, objects = {}, []
+    for i, b in enumerate(scene.bodies):
+        key = (b.shape, b.size)
+        if key not in meshes:
+            meshes[key] = make_mesh(f"{b.shape}{len(meshes)}", b.shape, b.size)
+        obj = bpy.data.objects.new(f"body{i:05d}", meshes[key])
+        sc.collection.objects.link(obj)
+        obj.location = scenes.vec_to_zup(b.position)
+        obj.rotation_mode = "QUATERNION"
+        obj.rotation_quaternion = scenes.quat_to_zup(b.orientation)
+        objects.append(obj)
+
+    # one operator call per type over the selection (per-object operators are slow)
+    for obj in sc.objects:
+        obj.select_set(obj is not ground)
+    bpy.context.view_layer.objects.active = objects[0]
+    bpy.ops.rigidbody.objects_add(type="ACTIVE")
+    for obj in sc.objects:
+        obj.select_set(obj is ground)
+    bpy.context.view_layer.objects.active = ground
+    bpy.ops.rigidbody.objects_add(type="PASSIVE")
+
+    for obj, b in zip(objects, scene.bodies):
+        rb = obj.rigid_body
+        rb.collision_shape = "BOX" if b.shape == "box" else "SPHERE"
+        rb.mass = b.mass
+        rb.friction, rb.restitution = mu, e
+        if not damping:
+            rb.linear_damping = rb.angular_damping = 0.0
+        rb.use_deactivation = False
+    rb = ground.rigid_body
+    rb.collision_shape = "BOX"
+    rb.friction, rb.restitution = mu, e
+    margin = objects[0].rigid_body.collision_margin
+    settings = {
+        "fps": scenes.FPS, "substeps_per_frame": substeps, "solver_iterations": rbw.solver_iterations,
+        "split_impulse": rbw.use_split_impulse, "time_scale": rbw.time_scale,
+        "friction_per_object": mu, "restitution_per_object": e, "combine": "product (Bullet)",
+        "damping": ("Blender defaults: linear 0.04, angular 0.1" if damping
+                    else "linear 0, angular 0 (Blender defaults 0.04 / 0.1)"),
+        "collision_margin": margin, "use_margin": objects[0].rigid_body.use_margin,
+        "collision_shapes": "BOX / SPHERE", "deactivation": False,
+        "threads": "process pinned to one CPU by compare.py" if len(os.sched_getaffinity(0)) == 1
+                   else f"{len(os.sched_getaffinity(0))} CPUs allowed",
+    }
+    return sc, objects, settings
+
+
+def main() -> None:
+    import argparse
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scene", choices=list(scenes.SCENES))
+    ap.add_argument("--seconds", type=float, default=None)
+    ap.add_argument("--substeps", type=int, default=None, help=f"substeps per frame (default {DEFAULT_SUBSTEPS})")
+    ap.add_argument("--default-damping", action="store_true",
+                    help="keep Blender's default damping (linear 0.04, angular 0.1) instead of 0")
+    args = ap.parse_args()
+    scene = scenes.build(args.scene, args.seconds)
+    substeps = args.substeps or DEFAULT_SUBSTEPS
+    sc, objects, settings = build(scene, substeps, args.default_damping)
+    sc.frame_set(1)                      # the initial state (builds the Bullet world)
+
+    def centres():
+        return scenes.positions_from_zup([tuple(o.matrix_world.translation) for o in objects])
+
+    record = set(scene.recorded_frames())
+    positions = [centres()]
+    clock = scenes.StepClock()
+    for frame in range(1, scene.frames + 1):
+        with clock:
+            sc.frame_set(frame + 1)
+        if frame in record:
+            positions.append(centres())
+    print(json.dumps(scenes.result("blender", bpy.app.version_string, scene, clock,
+                                   np.array(positions), settings)))
+
+
+if __name__ == "__main__":
+    main()

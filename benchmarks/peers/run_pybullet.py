@@ -1,0 +1,112 @@
+"""PyBullet on one peer-benchmark scene; prints one JSON line.
+
+    benchmarks/peers/.venv-peers/bin/python benchmarks/peers/run_pybullet.py SCENE [--seconds S]
+
+Settings (PyBullet 3.2.7, DIRECT mode, Z up: scenes are converted from Y up):
+- time step 1/240 s (PyBullet's default), 10 stepSimulation calls per 1/24 s frame; the
+  default solver (sequential impulses, 50 iterations in PyBullet's default parameters);
+- Bullet multiplies the friction (and the restitution) of a pair, so every object gets
+  sqrt(mu) (sqrt(e)) and each pair exactly mu (e); rolling and spinning friction 0;
+- no damping (PyBullet's default linear damping 0.04 and angular 0.04 set to 0);
+- boxes: GEOM_BOX with the exact half extents (Bullet keeps its 0.04 m margin inside the
+  box); spheres: GEOM_SPHERE; ground: a GEOM_PLANE; inertia from the shape and the mass;
+- sphere drop only: contactBreakingThreshold 0.005 m (the default 0.02 keeps stale contacts
+  alive and swallows the bounce; the parameter is global to the process, so the stacking
+  scenes keep the default that helps them stay still);
+- deactivation (sleeping) left as Bullet's default.
+Only the stepSimulation calls are timed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import scenes  # noqa: E402
+
+import pybullet as p  # noqa: E402
+
+TIME_STEP = 1.0 / 240.0
+STEPS_PER_FRAME = int(round(1.0 / (TIME_STEP * scenes.FPS)))   # 10
+
+
+def xyzw(q_wxyz):
+    w, x, y, z = q_wxyz
+    return (x, y, z, w)
+
+
+def build(scene: scenes.Scene, client: int) -> tuple[list, dict]:
+    p.resetSimulation(physicsClientId=client)
+    p.setGravity(*scenes.vec_to_zup(scene.gravity), physicsClientId=client)
+    p.setTimeStep(TIME_STEP, physicsClientId=client)
+    if scene.name == "drop":
+        p.setPhysicsEngineParameter(contactBreakingThreshold=0.005, physicsClientId=client)
+    params = p.getPhysicsEngineParameters(physicsClientId=client)
+    mu = scenes.per_object(scene.mu, "product")
+    e = scenes.per_object(scene.e, "product") if scene.e > 0 else 0.0
+    plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
+    ground = p.createMultiBody(0.0, plane, -1, (0.0, 0.0, scene.ground_height), physicsClientId=client)
+    p.changeDynamics(ground, -1, lateralFriction=mu, restitution=e, rollingFriction=0.0,
+                     spinningFriction=0.0, physicsClientId=client)
+    shapes, ids = {}, []
+    for b in scene.bodies:
+        key = (b.shape, b.size)
+        if key not in shapes:
+            if b.shape == "box":
+                shapes[key] = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.5 * s for s in b.size],
+                                                     physicsClientId=client)
+            else:
+                shapes[key] = p.createCollisionShape(p.GEOM_SPHERE, radius=b.radius, physicsClientId=client)
+        body = p.createMultiBody(b.mass, shapes[key], -1, scenes.vec_to_zup(b.position),
+                                 xyzw(scenes.quat_to_zup(b.orientation)), physicsClientId=client)
+        p.changeDynamics(body, -1, lateralFriction=mu, restitution=e, rollingFriction=0.0,
+                         spinningFriction=0.0, linearDamping=0.0, angularDamping=0.0,
+                         physicsClientId=client)
+        ids.append(body)
+    settings = {
+        "time_step": TIME_STEP, "steps_per_frame": STEPS_PER_FRAME,
+        "solver_iterations": params.get("numSolverIterations"),
+        "contact_breaking_threshold": 0.005 if scene.name == "drop" else "default (0.02)",
+        "friction_per_object": mu, "restitution_per_object": e, "combine": "product (Bullet)",
+        "damping": "linear 0, angular 0", "rolling_spinning_friction": 0.0,
+        "engine_parameters": {k: v for k, v in params.items() if isinstance(v, (int, float))},
+    }
+    return ids, settings
+
+
+def main() -> None:
+    args = scenes.common_args()
+    scene = scenes.build(args.scene, args.seconds)
+    client = p.connect(p.DIRECT)
+    ids, settings = build(scene, client)
+
+    def centres():
+        return scenes.positions_from_zup(
+            [p.getBasePositionAndOrientation(i, physicsClientId=client)[0] for i in ids])
+
+    record = set(scene.recorded_frames())
+    positions = [centres()]
+    clock = scenes.StepClock()
+    for frame in range(1, scene.frames + 1):
+        with clock:
+            for _ in range(STEPS_PER_FRAME):
+                p.stepSimulation(physicsClientId=client)
+        if frame in record:
+            positions.append(centres())
+    version = "3.2.7 (API %d)" % p.getAPIVersion(physicsClientId=client)
+    try:
+        from importlib.metadata import version as dist_version
+        version = dist_version("pybullet")
+    except Exception:
+        pass
+    p.disconnect(client)
+    print(json.dumps(scenes.result("pybullet", version, scene, clock,
+                                   np.array(positions), settings)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,92 @@
+"""simbake on one peer-benchmark scene; prints one JSON line.
+
+    /work/main/.venv/bin/python benchmarks/peers/run_simbake.py SCENE [--seconds S]
+
+Settings: the world's defaults (automatic substeps per 1/24 s frame: at most 1/240 s each,
+no body travels more than 0.2 of its thickness per substep; 5 collision sweeps, up to 10
+contact sweeps, shock propagation), every body with the scene's mu and e (the core combines
+friction by geometric mean and restitution by max, so the pair gets exactly mu and e).
+Boxes: LevelSet.box and box_mesh(size, 4) samples; spheres: LevelSet.sphere and
+sphere_mesh(r, 8) samples (as the pipeline's primitives). Only World.step_frame is timed.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import scenes  # noqa: E402
+
+import simbake  # noqa: E402
+from simbake import _core  # noqa: E402
+
+BOX_SUBDIVISIONS = 4
+SPHERE_SUBDIVISIONS = 8
+
+
+def build_world(scene: scenes.Scene) -> "_core.World":
+    world = _core.World(gravity=np.array(scene.gravity, dtype=float))
+    world.set_ground(scene.ground_height, scenes.per_object(scene.mu, "geometric"), 0.0)
+    shapes = {}   # one level set and sample set per distinct shape (the pile shares one)
+    for b in scene.bodies:
+        key = (b.shape, b.size)
+        if key not in shapes:
+            if b.shape == "box":
+                size = np.array(b.size, dtype=float)
+                shapes[key] = (_core.LevelSet.box(size), _core.box_mesh(size, BOX_SUBDIVISIONS)[0],
+                               _core.box_mass_properties(size))
+            else:
+                shapes[key] = (_core.LevelSet.sphere(b.radius), _core.sphere_mesh(b.radius, SPHERE_SUBDIVISIONS)[0],
+                               _core.sphere_mass_properties(b.radius))
+        level_set, samples, mass_properties = shapes[key]
+        world.add_body(level_set, samples, mass_properties, b.mass, np.array(b.position, dtype=float),
+                       np.array(b.orientation, dtype=float), np.zeros(3), np.zeros(3),
+                       scenes.per_object(scene.mu, "geometric"), scene.e, False)
+    return world
+
+
+def main() -> None:
+    args = scenes.common_args()
+    scene = scenes.build(args.scene, args.seconds)
+    world = build_world(scene)
+    record = set(scene.recorded_frames())
+    positions = [world.mesh_poses()[0].copy()]            # box/sphere meshes are centred
+    clock = scenes.StepClock()
+    substeps = []
+    for frame in range(1, scene.frames + 1):
+        with clock:
+            substeps.append(world.step_frame(1.0 / scenes.FPS, 0))
+        if frame in record:
+            positions.append(world.mesh_poses()[0].copy())
+    stats = world.statistics()
+    profile = {k: float(v) for k, v in world.profile().items()}
+    settings = {
+        "substeps": "automatic (step_frame(1/24, 0))",
+        "substeps_per_frame_mean": float(np.mean(substeps)),
+        "substeps_per_frame_max": int(max(substeps)),
+        "friction_per_object": scenes.per_object(scene.mu, "geometric"),
+        "restitution_body": scene.e, "restitution_ground": 0.0,
+        "combine": "friction sqrt(a b), restitution max(a, b)",
+        "box_samples": f"box_mesh(size, {BOX_SUBDIVISIONS})", "sphere_samples": f"sphere_mesh(r, {SPHERE_SUBDIVISIONS})",
+    }
+    with open(_core.__file__, "rb") as f:
+        core_sha1 = hashlib.sha1(f.read()).hexdigest()[:12]
+    extra = {"core_module": {"path": _core.__file__, "sha1": core_sha1,
+                             "mtime": datetime.datetime.fromtimestamp(os.path.getmtime(_core.__file__),
+                                                                      datetime.timezone.utc).isoformat(timespec="seconds")},
+             "profile_seconds": profile,
+             "profile_per_simulated_second": {k: v / (scene.frames / scenes.FPS) for k, v in profile.items()},
+             "statistics": {k: (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
+                            for k, v in stats.items()}}
+    print(json.dumps(scenes.result("simbake", simbake.__version__, scene, clock,
+                                   np.array(positions), settings, extra)))
+
+
+if __name__ == "__main__":
+    main()
