@@ -254,8 +254,8 @@ def write_markdown(payload: dict, path: Path) -> None:
     if any(s.startswith("pile") for s in payload["scenes"]):
         lines += ["## Piles in detail", "",
                   "| engine | scene | simulated s | runs | wall / sim s | first second | vmax end (m/s) | "
-                  "below ground | lowest centre (m) | highest centre (m) | exploded |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+                  "below ground | lowest centre (m) | highest centre (m) | farthest centre from the axis (m) | exploded |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
         for scene in [s for s in payload["scenes"] if s.startswith("pile")]:
             for e in engines:
                 entry = res.get(e, {}).get(scene)
@@ -265,7 +265,7 @@ def write_markdown(payload: dict, path: Path) -> None:
                 lines.append(f"| {LABELS[e]} | {scene} | {entry['simulated_seconds']:g} | {entry['runs']} | "
                              f"{fmt(entry['wall_per_simulated_second'])} | {fmt(entry['first_second_wall'])} | "
                              f"{fmt(a.get('max_speed_end'))} | {a.get('below_ground')} | {fmt(a.get('min_height_end'))} | "
-                             f"{fmt(a.get('max_height_end'))} | {a.get('exploded')} |")
+                             f"{fmt(a.get('max_height_end'))} | {fmt(a.get('max_radius_end'))} | {a.get('exploded')} |")
         lines += ["", "'first second' is the stepping wall time of simulated second 1 (free fall and the "
                   "first impacts): the only window where a capped simbake pile compares like for like. "
                   "'exploded' means a centre below the ground, a speed above free fall from the highest "
@@ -286,7 +286,8 @@ def write_markdown(payload: dict, path: Path) -> None:
                          + " | ".join(fmt(p.get(s)) for s in stages)
                          + f" | {fmt(entry['wall_per_simulated_second'])} |")
         core = prof[0][1]["extra"].get("core_module", {})
-        lines += ["", f"simbake core module {core.get('sha1', '?')} built {core.get('mtime', '?')}; "
+        lines += ["", f"simbake core module {core.get('path', '?')} (sha1 {core.get('sha1', '?')}, built "
+                  f"{core.get('mtime', '?')}), run by {payload['options']['simbake_python']}; "
                   f"git HEAD {payload['git']['head']}"
                   + (f", with uncommitted changes to {', '.join(payload['git']['uncommitted_core_changes'])} "
                      "(the module may not match them)" if payload['git']['uncommitted_core_changes'] else "")
@@ -348,7 +349,11 @@ def main() -> None:
     ap.add_argument("--no-extras", action="store_true", help="skip the extra Blender settings runs")
     ap.add_argument("--timeout", type=float, default=1800.0, help="per run (s)")
     ap.add_argument("--out", type=Path, default=RESULTS, help="directory of peers.{json,md,png}")
+    ap.add_argument("--simbake-python", type=Path, default=ENGINES["simbake"][0],
+                    help="interpreter with simbake installed (default: the project's .venv); e.g. one "
+                         "built from a clean checkout of HEAD while the work tree is being edited")
     args = ap.parse_args()
+    ENGINES["simbake"] = (args.simbake_python, ENGINES["simbake"][1])
     args.seconds_map = {}
     for item in args.seconds:
         name, _, value = item.partition("=")
@@ -413,7 +418,8 @@ def main() -> None:
                 for e in args.engines}
     payload = {
         "benchmark": "peers", "machine": machine_info(), "git": git_state(),
-        "options": {"engines": args.engines, "scenes": args.scenes, "repeats": args.repeats, "slow": args.slow,
+        "options": {"simbake_python": str(args.simbake_python), "engines": args.engines,
+                    "scenes": args.scenes, "repeats": args.repeats, "slow": args.slow,
                     "quick": args.quick, "seconds": args.seconds_map,
                     "simbake_pile_seconds": args.simbake_pile_seconds, "extras": not args.no_extras},
         "engines": args.engines, "scenes": [s for s in SCENE_ORDER if s in args.scenes],

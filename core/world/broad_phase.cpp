@@ -6,14 +6,16 @@
 // so the cost is O(n log n + pairs) rather than O(n^2). The pair list is sorted by index, so
 // the order in which later stages see pairs depends only on the scene.
 //
-// Sleeping. Bodies are grouped into islands (connected through this step's broad-phase
-// pairs, the same relation that wakes them, so that two neighbouring islands cannot keep
-// waking each other; the ground and kinematic bodies do not connect). A body is at rest while none of its points
+// Sleeping. Bodies are grouped into islands connected through this step's contact points
+// (the ground and kinematic bodies do not connect). A body is at rest while none of its points
 // has strayed further than sleep_speed * sleep_time / 2 from where it was when its rest began
 // (so the bottom of a loaded pile, whose velocities flicker at the solver's tolerance without
 // going anywhere, counts as resting). When every body of an island has rested for sleep_time
 // seconds the island sleeps: its velocities are zeroed and every stage skips it. A sleeping
-// island wakes when an awake dynamic body or a moving kinematic body comes within its box.
+// island wakes when an awake dynamic body or a moving kinematic body touches it: a sample of
+// one inside the other, the awake body taken where it will be at the end of the step. Mere
+// box overlap does not wake it, so a settled part of a pile sleeps beside a part still
+// sliding.
 //
 // Materials. A pair's friction is the geometric mean sqrt(mu_a mu_b) and its restitution the
 // larger of the two (both symmetric and both give back the common value when equal; max
@@ -78,24 +80,24 @@ void World::broad_phase(double dt) {
   compute_boxes(dt);
   std::vector<std::pair<int, int>>& overlaps = overlap_scratch_;
   overlapping_pairs(overlaps);
-  // wake every sleeping island an awake body or a moving kinematic body reaches; a woken
-  // island may reach further sleeping islands, hence the loop
+  // wake every sleeping island an awake body or a moving kinematic body touches; a woken
+  // island may touch further sleeping islands, hence the loop
   for (bool woke = true; woke;) {
     woke = false;
     for (const auto& [a, b] : overlaps) {
       if (asleep_[a] == asleep_[b]) continue;
       const int sleeper = asleep_[a] ? a : b, other = asleep_[a] ? b : a;
-      if (!defs_[other].kinematic || moving_kinematic(other)) {
-        wake_island(sleeper);
-        woke = true;
-      }
+      if (defs_[other].kinematic && !moving_kinematic(other)) continue;
+      if (!touching(other, sleeper, dt)) continue;
+      wake_island(sleeper);
+      woke = true;
     }
     if (woke) compute_boxes(dt);
   }
   pairs_.clear();
   for (const auto& [a, b] : overlaps) {
     if (defs_[a].kinematic && defs_[b].kinematic) continue;
-    if (asleep_[a] || asleep_[b]) continue;  // both asleep, or asleep against a still kinematic body
+    if (asleep_[a] || asleep_[b]) continue;  // asleep, or asleep against a body not touching it
     pairs_.push_back({a, b, combine_friction(defs_[a].friction, defs_[b].friction),
                       combine_restitution(defs_[a].restitution, defs_[b].restitution)});
   }
@@ -106,6 +108,30 @@ void World::broad_phase(double dt) {
                         combine_restitution(defs_[a].restitution, ground_->restitution)});
     }
   }
+}
+
+// Does awake body `mover`, advanced over the step with gravity, touch sleeping body `sleeper`?
+bool World::touching(int mover, int sleeper, double dt) const {
+  RigidBodyState moved = states_[mover];
+  if (defs_[mover].kinematic) {
+    moved.x += dt * moved.v;
+    moved.q = prescribed_rotation(moved.q, spin_[mover], dt);
+  } else {
+    moved.x += dt * (moved.v + dt * settings_.gravity);
+    moved.q = free_rotation(defs_[mover], moved.q, moved.l, dt);
+  }
+  const Pose poses[2] = {mesh_pose(defs_[mover], moved), mesh_pose(defs_[sleeper], states_[sleeper])};
+  const int bodies[2] = {mover, sleeper};
+  for (int k = 0; k < 2; ++k) {
+    const RigidBodyDef& inside = defs_[bodies[1 - k]];
+    if (!inside.shape) continue;
+    const Points& samples = defs_[bodies[k]].samples;
+    for (Eigen::Index s = 0; s < samples.rows(); ++s) {
+      const Vec3 p = poses[1 - k].apply_inverse(poses[k].apply(samples.row(s).transpose()));
+      if (inside.shape->bounds().contains(p) && inside.shape->phi(p) < 0.0) return true;
+    }
+  }
+  return false;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -129,12 +155,12 @@ void World::wake_island(int i) {
 void World::update_sleeping(double dt) {
   if (settings_.sleep_time <= 0.0) return;
   const int n = body_count();
-  // islands of awake dynamic bodies through this step's pairs (union-find, smaller root wins)
+  // islands of awake dynamic bodies through this step's contacts (union-find, smaller root wins)
   for (int i = 0; i < n; ++i) {
     if (!asleep_[i]) island_[i] = i;
   }
-  for (const BodyPair& pair : pairs_) {
-    const int a = pair.a, b = pair.b;
+  for (const ContactPoint& contact : contacts_) {
+    const int a = contact.point.a, b = contact.point.b;
     if (b == kGround || defs_[a].kinematic || defs_[b].kinematic) continue;
     const int ra = find_island(a), rb = find_island(b);
     if (ra != rb) island_[std::max(ra, rb)] = std::min(ra, rb);

@@ -153,6 +153,7 @@ class World {
   bool moving_kinematic(int i) const;
   void compute_boxes(double dt);
   void overlapping_pairs(std::vector<std::pair<int, int>>& out) const;
+  bool touching(int mover, int sleeper, double dt) const;
   int find_island(int i);
   void wake_island(int i);
   void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
@@ -164,6 +165,9 @@ class World {
   void exchange_impulse(const Penetration& p, const Vec3& J);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
   void find_contacts();
+  static void reduce_to_four(std::vector<Penetration>& points);
+  static void reduce_contact_points(std::vector<Penetration>& points, std::size_t begin);
+  static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact);
   void assign_contact_levels();
