@@ -43,10 +43,11 @@ Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitu
   return sliding_impulse(K, n, v, restitution, friction);
 }
 
-Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction) {
+Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction,
+                            double target_speed) {
   // normal: push only
   const double jn_old = total.dot(n);
-  const double jn = std::max(0.0, jn_old - v.dot(n) / n.dot(K * n));
+  const double jn = std::max(0.0, jn_old + (target_speed - v.dot(n)) / n.dot(K * n));
   Vec3 jt = total - jn_old * n;
   if (friction <= 0.0 || jn == 0.0) return jn * n;
   // friction along the slip, with the velocity the normal update leaves
@@ -64,7 +65,7 @@ Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const V
   if (length <= limit) return jn * n + jt;
   const Vec3 direction = n + friction * (jt / length);
   const double denominator = n.dot(K * direction);
-  const double j = -n.dot(v - K * total) / denominator;
+  const double j = (target_speed - n.dot(v - K * total)) / denominator;
   if (denominator > 1e-12 * n.dot(K * n) && j > 0.0) return j * direction;
   return jn * n + jt * (limit / length);
 }

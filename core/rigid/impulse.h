@@ -48,7 +48,9 @@ Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitu
 // cone test, sliding impulse with T from the velocity before the impulse) solve the same law
 // for a single point; iterated over the points of a face they fan the friction out of line
 // with the rotational coupling of off-centre points (anisotropic K), and a box on a slope
-// creeps where it must stick. Returns the new total.
-Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction);
+// creeps where it must stick. target_speed >= 0 asks for that separating normal speed
+// instead of 0 (penetration recovery). Returns the new total.
+Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction,
+                            double target_speed = 0.0);
 
 }  // namespace simbake

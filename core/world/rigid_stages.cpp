@@ -344,6 +344,9 @@ void World::refresh_contact(Penetration& p) const {
 
 // Contact impulse at one contact point: one projected Gauss-Seidel update of the point's
 // total impulse this stage (see contact_impulse_update); only the change is applied. A point
+// deeper than penetration_slop asks for a separating speed of penetration_recovery times the
+// excess depth per step (Baumgarte stabilization, capped): without it, the penetration left
+// by a hard impact, or gathered while a tall stack first settles, would stay for good. A point
 // whose bodies have not changed since it was last evaluated is skipped: the update would
 // give the same answer, so converged parts of a pile cost nothing more.
 bool World::apply_contact_impulse(ContactPoint& contact) {
@@ -355,7 +358,11 @@ bool World::apply_contact_impulse(ContactPoint& contact) {
   refresh_contact(p);
   const Mat3 K = (a_moves ? contact.k_a : Mat3::Zero()) + (b_moves ? contact.k_b : Mat3::Zero());
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
-  const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction);
+  // penetration recovery: deeper than the slop, ask for a small separating speed
+  const double excess = -p.phi - settings_.penetration_slop;
+  const double target = excess > 0.0 ? std::min(settings_.penetration_recovery * excess / dt_,
+                                                settings_.max_recovery_speed) : 0.0;
+  const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction, target);
   const Vec3 change = total - contact.total;
   if ((K * change).norm() <= settings_.contact_tolerance) {
     contact.seen_a = va;

@@ -32,6 +32,9 @@ struct WorldSettings {
   double sleep_speed = 0.01;             // (m/s) a body whose points stray less than
   double sleep_time = 0.5;               // (s) sleep_speed * sleep_time / 2 for sleep_time
                                          // may sleep; sleep_time 0 disables sleeping
+  double penetration_slop = 2e-4;        // (m) deeper contacts are pushed apart ...
+  double penetration_recovery = 0.2;     // ... at this fraction of (depth - slop) per step
+  double max_recovery_speed = 0.5;       // (m/s) ... but never faster than this
   double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
                                          // changes a point velocity by more than this
   double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
