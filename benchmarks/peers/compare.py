@@ -288,7 +288,7 @@ def write_markdown(payload: dict, path: Path) -> None:
         core = prof[0][1]["extra"].get("core_module", {})
         lines += ["", f"simbake core module {core.get('path', '?')} (sha1 {core.get('sha1', '?')}, built "
                   f"{core.get('mtime', '?')}), run by {payload['options']['simbake_python']}; "
-                  f"git HEAD {payload['git']['head']}"
+                  f"git HEAD at the end of the run {payload['git']['head']}"
                   + (f", with uncommitted changes to {', '.join(payload['git']['uncommitted_core_changes'])} "
                      "(the module may not match them)" if payload['git']['uncommitted_core_changes'] else "")
                   + (". WARNING: the module changed during the run: " + ", ".join(payload["simbake_modules"])
@@ -352,7 +352,21 @@ def main() -> None:
     ap.add_argument("--simbake-python", type=Path, default=ENGINES["simbake"][0],
                     help="interpreter with simbake installed (default: the project's .venv); e.g. one "
                          "built from a clean checkout of HEAD while the work tree is being edited")
+    ap.add_argument("--note", action="append", default=[],
+                    help="a line for the notes of peers.md (e.g. which commit the simbake module was built from)")
+    ap.add_argument("--render-only", type=Path, metavar="PEERS_JSON",
+                    help="no runs: rewrite peers.md and peers.png (in --out) from an existing peers.json, "
+                         "adding any --note")
     args = ap.parse_args()
+    if args.render_only:
+        payload = json.loads(args.render_only.read_text())
+        payload["notes"] = payload.get("notes", []) + [n for n in args.note if n not in payload.get("notes", [])]
+        args.out.mkdir(parents=True, exist_ok=True)
+        json_path = args.out / "peers.json"
+        json_path.write_text(json.dumps(finite(payload), indent=1) + "\n")
+        write_markdown(payload, args.out / "peers.md")
+        print(write_chart(json_path, args.out / "peers.png"))
+        return
     ENGINES["simbake"] = (args.simbake_python, ENGINES["simbake"][1])
     args.seconds_map = {}
     for item in args.seconds:
@@ -393,7 +407,7 @@ def main() -> None:
                       f"{r.get('error') or r['summary']}", flush=True)
 
     # checks: same scenes everywhere, one simbake module throughout
-    notes = []
+    notes = list(args.note)
     for scene in args.scenes:
         digests = {e: results[e][scene].get("scene_digest") for e in args.engines if "error" not in results[e][scene]}
         if len(set(digests.values())) > 1:

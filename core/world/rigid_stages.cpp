@@ -112,7 +112,10 @@ void World::find_penetrations(int a, int b, bool only_approaching, std::vector<P
       if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
       Vec3 n_local;
       phi = defs_[b].shape->phi_and_normal(p, n_local);
-      if (phi >= 0.0) continue;
+      // within kTouching of the surface is touching, not penetrating: a sample lying exactly
+      // on another body's edge (an exactly aligned stack) would otherwise act, by round-off,
+      // with the side face's normal and push the stack sideways
+      if (phi >= -kTouching) continue;
       n = pose_b.rotation * n_local;
     }
     const Vec3 x = pose_a.apply(m);

@@ -118,6 +118,7 @@ class World {
 
  private:
   static constexpr int kGround = -1;
+  static constexpr double kTouching = 1e-9;  // (m) closer than this to a surface is touching
 
   // A sample point of body `a` found inside body `b` (or the ground) at the candidates
   struct Penetration {
