@@ -63,6 +63,10 @@ PYBIND11_MODULE(_core, m) {
         py::arg("size"), py::arg("subdivisions"));
   m.def("vertex_normals", [](const Points& v, const Triangles& t) { return vertex_normals(to_mesh(v, t)); },
         py::arg("vertices"), py::arg("triangles"));
+  m.def("surface_samples", [](const Points& v, const Triangles& t, double spacing) {
+          return surface_samples(to_mesh(v, t), spacing);
+        }, py::arg("vertices"), py::arg("triangles"), py::arg("max_spacing"),
+        "Vertices plus points along every edge longer than max_spacing");
   m.def("is_closed", [](const Points& v, const Triangles& t) { return is_closed(to_mesh(v, t)); },
         py::arg("vertices"), py::arg("triangles"));
   m.def("mass_properties", [](const Points& v, const Triangles& t) { return mass_dict(mass_properties(to_mesh(v, t))); },
@@ -157,6 +161,20 @@ PYBIND11_MODULE(_core, m) {
            py::arg("origin"), py::arg("orientation"), py::arg("linear_velocity") = Vec3::Zero(),
            py::arg("angular_velocity") = Vec3::Zero(), py::arg("friction") = 0.5,
            py::arg("restitution") = 0.0, py::arg("kinematic") = false)
+      .def("set_kinematic_track", [](World& w, int i, const std::vector<double>& times, const Points& origins,
+                                      const Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>& orientations) {
+             if (origins.rows() != static_cast<Eigen::Index>(times.size()) || orientations.rows() != origins.rows()) {
+               throw std::invalid_argument("keys need one position and one orientation per time");
+             }
+             std::vector<Vec3> o;
+             std::vector<Quat> q;
+             for (Eigen::Index k = 0; k < origins.rows(); ++k) {
+               o.emplace_back(origins.row(k).transpose());
+               q.push_back(quat_wxyz(orientations.row(k).transpose()));
+             }
+             w.set_kinematic_track(i, KinematicTrack(times, o, q));
+           }, py::arg("index"), py::arg("times"), py::arg("positions"), py::arg("orientations"),
+           "Keyed kinematic body: mesh-origin positions (n, 3) and orientations (n, 4) [w, x, y, z] at times (s)")
       .def("step_frame", &World::step_frame, py::arg("frame_dt"), py::arg("substeps") = 0,
            py::call_guard<py::gil_scoped_release>())
       .def("step", &World::step, py::arg("dt"), py::call_guard<py::gil_scoped_release>())
@@ -184,6 +202,9 @@ PYBIND11_MODULE(_core, m) {
              d["angular_velocity"] = angular_velocity(w.body_def(i), s);
              return d;
            }, py::arg("index"))
+      .def("asleep", &World::asleep, py::arg("index"))
+      .def_property_readonly("sleeping_count", &World::sleeping_count)
+      .def_property_readonly("time", &World::time)
       .def("statistics", [](const World& w) {
              const StepStatistics& s = w.statistics();
              py::dict d;

@@ -102,6 +102,7 @@ int World::add_body(const BodyDesc& desc) {
   defs_.push_back(std::move(def));
   states_.push_back(state);
   spin_.push_back(spin);
+  tracks_.emplace_back();
   candidates_.push_back(state);
   candidate_poses_.push_back(mesh_pose(defs_.back(), state));
   omega_.push_back(Vec3::Zero());
@@ -118,6 +119,34 @@ int World::add_body(const BodyDesc& desc) {
   return body_count() - 1;
 }
 
+void World::set_kinematic_track(int i, KinematicTrack track) {
+  require(i >= 0 && i < body_count() && defs_[i].kinematic, "only kinematic bodies follow keys");
+  tracks_[i] = std::move(track);
+  move_kinematic_bodies(0.0);
+}
+
+// Keyed bodies sit on their track at the step's start and move at the constant velocity and
+// spin that reach the track's pose at the step's end exactly (update_positions moves them)
+void World::move_kinematic_bodies(double dt) {
+  for (int i = 0; i < body_count(); ++i) {
+    if (tracks_[i].empty()) continue;
+    Vec3 origin, origin_next;
+    Quat orientation, orientation_next;
+    tracks_[i].pose_at(time_, origin, orientation);
+    set_mesh_pose(defs_[i], origin, orientation, states_[i]);
+    if (dt <= 0.0) {
+      states_[i].v = Vec3::Zero();
+      spin_[i] = Vec3::Zero();
+      continue;
+    }
+    tracks_[i].pose_at(time_ + dt, origin_next, orientation_next);
+    RigidBodyState next;
+    set_mesh_pose(defs_[i], origin_next, orientation_next, next);
+    states_[i].v = (next.x - states_[i].x) / dt;
+    spin_[i] = rotation_vector_from_quat(next.q * states_[i].q.conjugate()) / dt;
+  }
+}
+
 int World::automatic_substeps(double frame_dt) const {
   // Each body may travel a fraction of its thickness per substep (no tunnelling through its
   // thinnest part); its speed over the frame is bounded by the current speed of its fastest
@@ -128,6 +157,13 @@ int World::automatic_substeps(double frame_dt) const {
     const RigidBodyDef& def = defs_[i];
     const Vec3 omega = def.kinematic ? spin_[i] : angular_velocity(def, states_[i]);
     double speed = states_[i].v.norm() + omega.norm() * def.bounding_radius;
+    if (!tracks_[i].empty()) {  // a keyed body: how far its track takes it over the frame
+      Vec3 o0, o1;
+      Quat q0, q1;
+      tracks_[i].pose_at(time_, o0, q0);
+      tracks_[i].pose_at(time_ + frame_dt, o1, q1);
+      speed = std::max(speed, ((o1 - o0).norm() + q1.angularDistance(q0) * (def.bounding_radius + def.center.norm())) / frame_dt);
+    }
     if (!def.kinematic) speed += settings_.gravity.norm() * frame_dt;
     steps = std::max(steps, std::ceil(speed * frame_dt / (settings_.travel_fraction * def.thickness)));
   }
@@ -153,13 +189,14 @@ int World::step_frame(double frame_dt, int substeps) {
 
 void World::step(double dt) {
   dt_ = dt;
-  { ScopedTimer timer(profile_.broad_phase); broad_phase(dt); }
+  { ScopedTimer timer(profile_.broad_phase); move_kinematic_bodies(dt); broad_phase(dt); }
   { ScopedTimer timer(profile_.collisions); resolve_collisions(dt); }
   { ScopedTimer timer(profile_.velocities); update_velocities(dt); }
   { ScopedTimer timer(profile_.contacts); resolve_contacts(dt); }
   { ScopedTimer timer(profile_.shock_propagation); propagate_shocks(); }
   { ScopedTimer timer(profile_.positions); update_positions(dt); }
   { ScopedTimer timer(profile_.sleeping); update_sleeping(dt); }
+  time_ += dt;
   ++stats_.substeps;
 }
 

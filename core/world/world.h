@@ -2,6 +2,8 @@
 //
 // World::step(dt) is the scheme of Guendelman, Bridson and Fedkiw (2003), as the seed notes
 // teach it, as a list of named stages (see step() in world.cpp):
+//   move_kinematic_bodies  keyed kinematic bodies placed on their tracks, with the velocity
+//                      that carries them to the next step's key pose
 //   broad_phase        pairs whose bounding boxes over the step overlap (and ground pairs)
 //   resolve_collisions elastic impulses with restitution at the deepest non-separating
 //                      point, from start-of-step velocities, candidates advanced with forces
@@ -16,6 +18,7 @@
 #pragma once
 
 #include "geometry/mass_properties.h"
+#include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
 #include <cstdint>
@@ -93,6 +96,9 @@ class World {
   void set_ground(const GroundDef& ground);
   // Validates and adds a body; returns its index (bodies are addressed by index)
   int add_body(const BodyDesc& desc);
+  // Makes kinematic body i follow a key track from now on (time 0 is when the world starts)
+  void set_kinematic_track(int i, KinematicTrack track);
+  double time() const { return time_; }  // (s) simulated so far
 
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
   // substeps == 0; returns the number of substeps taken
@@ -143,6 +149,7 @@ class World {
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
   // stages
+  void move_kinematic_bodies(double dt);
   void broad_phase(double dt);
   void update_sleeping(double dt);
   void resolve_collisions(double dt);
@@ -182,6 +189,7 @@ class World {
   std::vector<RigidBodyDef> defs_;          // (nbody) constant descriptions
   std::vector<RigidBodyState> states_;      // (nbody) state at the start of the step
   std::vector<Vec3> spin_;                  // (nbody) prescribed angular velocity of kinematic bodies (rad/s)
+  std::vector<KinematicTrack> tracks_;      // (nbody) key tracks of keyed kinematic bodies (else empty)
   std::vector<RigidBodyState> candidates_;  // (nbody) candidate end-of-step states
   std::vector<Pose> candidate_poses_;       // (nbody) mesh poses of the candidates
   std::vector<Vec3> omega_;                 // (nbody) angular velocity the current impulse
@@ -203,6 +211,7 @@ class World {
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
   double dt_ = 0.0;                         // current substep (s)
+  double time_ = 0.0;                       // simulated time at the start of the step (s)
   bool candidates_with_forces_ = false;     // collision stage: candidates include gravity
   bool average_velocities_ = false;         // contact stage: omega_ is the average velocity
   StepStatistics stats_;

@@ -199,3 +199,44 @@ TEST(World, RejectsBadBodies) {
   bad.restitution = 1.5;
   EXPECT_THROW(world.add_body(bad), std::invalid_argument);
 }
+
+// A keyed kinematic platform follows its keys exactly (linear between keys, slerp in
+// orientation, held after the last key)
+TEST(World, KeyedKinematicBodyFollowsItsKeys) {
+  World world;
+  BodyDesc platform = box_body(Vec3(2.0, 0.2, 2.0), 1.0, Vec3::Zero(), 3);
+  platform.kinematic = true;
+  const int p = world.add_body(platform);
+  const Quat turned(Eigen::AngleAxisd(M_PI / 2.0, Vec3::UnitY()));
+  world.set_kinematic_track(p, KinematicTrack({0.5, 2.5}, {Vec3(0.0, 0.0, 0.0), Vec3(2.0, 0.0, 0.0)},
+                                              {Quat::Identity(), turned}));
+  for (int f = 0; f < 36; ++f) world.step_frame(1.0 / 24.0);  // t = 1.5 s: half way along
+  EXPECT_TRUE(world.body_mesh_pose(p).translation.isApprox(Vec3(1.0, 0.0, 0.0), 1e-9));
+  const Quat half(Eigen::AngleAxisd(M_PI / 4.0, Vec3::UnitY()));
+  EXPECT_TRUE(Quat(world.body_mesh_pose(p).rotation).isApprox(half, 1e-9));
+  for (int f = 0; f < 36; ++f) world.step_frame(1.0 / 24.0);  // t = 3 s: held at the last key
+  EXPECT_TRUE(world.body_mesh_pose(p).translation.isApprox(Vec3(2.0, 0.0, 0.0), 1e-9));
+}
+
+// A platform keyed to start at once at v = 1 m/s carries a box (mu = 1) resting on it: the
+// box slips back by v^2 / (2 mu g) = 5.1 cm until friction has brought it up to speed, then
+// rides along, and slips forward by as much when the platform stops dead
+TEST(World, KeyedPlatformCarriesABoxWithCoulombSlip) {
+  World world;
+  BodyDesc platform = box_body(Vec3(3.0, 0.2, 2.0), 1.0, Vec3::Zero(), 3);
+  platform.kinematic = true;
+  platform.friction = 1.0;
+  const int p = world.add_body(platform);
+  world.set_kinematic_track(p, KinematicTrack({0.5, 2.5}, {Vec3::Zero(), Vec3(2.0, 0.0, 0.0)},
+                                              {Quat::Identity(), Quat::Identity()}));
+  BodyDesc box = box_body(Vec3::Constant(0.3), 1.0, Vec3(0.0, 0.25, 0.0), 3);
+  box.friction = 1.0;
+  world.add_body(box);
+  const double slip = 1.0 / (2.0 * 1.0 * 9.81);
+  for (int f = 0; f < 36; ++f) world.step_frame(1.0 / 24.0);  // t = 1.5 s, riding along
+  EXPECT_NEAR(world.body_state(1).x.x() - world.body_mesh_pose(p).translation.x(), -slip, 0.1 * slip);
+  EXPECT_NEAR(world.body_state(1).v.x(), 1.0, 1e-3);
+  for (int f = 0; f < 36; ++f) world.step_frame(1.0 / 24.0);  // t = 3 s, stopped
+  EXPECT_NEAR(world.body_state(1).x.x() - 2.0, 0.0, 0.1 * slip);
+  EXPECT_NEAR(world.body_state(1).x.y(), 0.25, 2e-3);
+}
