@@ -28,7 +28,10 @@ from .files import write_atomically
 from .scene import Body, Scene
 
 SPHERE_SUBDIVISIONS = 8  # 386 samples on a sphere, 0.5% faceting of the radius
-BOX_SUBDIVISIONS = 4     # 98 samples on a box: corners, edges and faces
+BOX_SUBDIVISIONS = 3     # 56 samples on a box: corners, edge thirds and 4 inside each face
+                         # (inner face samples are what hold an exactly aligned stack)
+SAMPLES_ACROSS = 4       # mesh bodies: edge samples no further apart than the thinnest
+                         # extent over this, so that coarse edges still catch other bodies
 VOXELS_ACROSS = 64       # automatic voxel size: the longest extent over this ...
 MIN_VOXELS_THIN = 6      # ... but at least this many voxels across the thinnest extent
 MAX_VOXELS = 5e7         # a filled grid of 5e7 voxels takes ~0.75 GB
@@ -42,6 +45,7 @@ class BodyAsset:
     vertices: np.ndarray        # (n, 3) float64 (m)
     triangles: np.ndarray       # (m, 3) int32
     normals: np.ndarray         # (n, 3) float64, area-weighted vertex normals
+    samples: np.ndarray         # (s, 3) float64 collision samples: vertices, then edge points
     mass_properties: dict       # volume, center, inertia at unit density
     level_set: "_core.LevelSet | None"  # None when nothing can touch the body
     voxel_size: float           # of the baked grid, 0 when analytic or not baked
@@ -150,7 +154,11 @@ def load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bod
             check_voxel_count(vertices, voxel_size, file, f"{key}.voxel_size")
             level_set = bake_level_set(vertices, triangles, voxel_size)
     normals = _core.vertex_normals(vertices, triangles)
-    return BodyAsset(vertices, triangles, normals, props, level_set, voxel_size)
+    samples = vertices
+    if shape.kind == "mesh":
+        extent = vertices.max(axis=0) - vertices.min(axis=0)
+        samples = _core.surface_samples(vertices, triangles, float(extent.min()) / SAMPLES_ACROSS)
+    return BodyAsset(vertices, triangles, normals, samples, props, level_set, voxel_size)
 
 
 def load_assets(scene: Scene) -> list[BodyAsset]:

@@ -8,7 +8,8 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
     [ground]    height, friction, restitution     (an infinite plane y = height; absent: none)
     [[bodies]]  name (required), mesh = "file.obj"  or  shape = { type = "sphere", radius = r }
                 | { type = "box", size = [x, y, z] }, density or mass, position, orientation,
-                linear_velocity, angular_velocity, friction, restitution, kinematic, voxel_size
+                linear_velocity, angular_velocity, friction, restitution, kinematic, voxel_size,
+                keys = [{ time, position, orientation }, ...] (kinematic bodies only)
     [[cloths]]  name (required), grid = { size = [w, d], resolution = [nx, nz] } or mesh = "...",
                 position, orientation, area_density, stretch_stiffness, bend_stiffness,
                 damping, strain_limit, compression, friction, thickness, pinned
@@ -41,7 +42,7 @@ from typing import Any, Callable, Iterable, Optional
 
 from .errors import SceneError
 
-__all__ = ["Shape", "Ground", "Body", "Cloth", "Scene", "load_scene"]
+__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_scene"]
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -81,6 +82,15 @@ class Ground:
 
 
 @dataclass(frozen=True)
+class Key:
+    """A pose of a keyed kinematic body's mesh origin at a time (s after start_frame)."""
+
+    time: float
+    position: Vec3
+    orientation: Quat  # (w, x, y, z), unit length
+
+
+@dataclass(frozen=True)
 class Body:
     """A rigid body. Exactly one of ``density`` / ``mass`` is set."""
 
@@ -96,6 +106,7 @@ class Body:
     restitution: float = 0.0
     kinematic: bool = False
     voxel_size: float = 0.0  # 0: automatic
+    keys: tuple[Key, ...] = ()  # kinematic only: the path it follows, times increasing
 
 
 @dataclass(frozen=True)
@@ -178,8 +189,9 @@ _GROUND_KEYS = ("height", "friction", "restitution")
 _BODY_KEYS = (
     "name", "mesh", "shape", "density", "mass", "position", "orientation",
     "linear_velocity", "angular_velocity", "friction", "restitution", "kinematic",
-    "voxel_size",
+    "voxel_size", "keys",
 )  # fmt: skip
+_KEY_KEYS = ("time", "position", "orientation")
 _SHAPE_KEYS = {"sphere": ("type", "radius"), "box": ("type", "size")}
 _ANY_SHAPE_KEYS = ("type", "radius", "size")
 _CLOTH_KEYS = (
@@ -261,20 +273,43 @@ def _body(t: _Table, base_dir: Path) -> Body:
         raise t.error("mass", "cannot be given together with density; give one of them")
     if density is None and mass is None:
         density = DEFAULT_DENSITY
+    position = t.vector("position", 3, ZERO3)
+    orientation = _orientation(t)
+    kinematic = t.boolean("kinematic", Body.kinematic)
     return Body(
         name=name,
         shape=shape,
         density=density,
         mass=mass,
-        position=t.vector("position", 3, ZERO3),
-        orientation=_orientation(t),
+        position=position,
+        orientation=orientation,
         linear_velocity=t.vector("linear_velocity", 3, ZERO3),
         angular_velocity=t.vector("angular_velocity", 3, ZERO3),
         friction=t.number("friction", Body.friction, _at_least(0)),
         restitution=t.number("restitution", Body.restitution, _within(0, 1)),
-        kinematic=t.boolean("kinematic", Body.kinematic),
+        kinematic=kinematic,
         voxel_size=t.number("voxel_size", Body.voxel_size, _at_least(0)),
+        keys=_keys(t, kinematic, position, orientation),
     )
+
+
+def _keys(t: _Table, kinematic: bool, position: Vec3, orientation: Quat) -> tuple[Key, ...]:
+    """``keys = [{ time, position, orientation }, ...]``: a kinematic body's path. A key's
+    position and orientation default to the body's; times are seconds after start_frame."""
+    if not t.has("keys"):
+        return ()
+    if not kinematic:
+        raise t.error("keys", "only a kinematic body (kinematic = true) follows keys")
+    keys = []
+    for k in t.tables("keys", _KEY_KEYS):
+        time = k.number("time")
+        if keys and not time > keys[-1].time:
+            raise k.error("time", f"must be later than the previous key's {keys[-1].time}, got {time}")
+        keys.append(Key(time=time, position=k.vector("position", 3, position),
+                        orientation=_orientation(k, orientation)))
+    if not keys:
+        raise t.error("keys", "must hold at least one key { time = ..., position = [...] }")
+    return tuple(keys)
 
 
 def _body_shape(t: _Table, base_dir: Path) -> Shape:
@@ -324,9 +359,9 @@ def _cloth(t: _Table, base_dir: Path) -> Cloth:
     )
 
 
-def _orientation(t: _Table) -> Quat:
+def _orientation(t: _Table, default: Quat = IDENTITY) -> Quat:
     """The ``orientation`` quaternion, normalized; a zero quaternion is an error."""
-    q = t.vector("orientation", 4, IDENTITY)
+    q = t.vector("orientation", 4, default)
     scale = max(abs(c) for c in q)  # scale first so huge or tiny values cannot overflow
     if scale == 0.0:
         raise t.error("orientation", "must be a non-zero quaternion [w, x, y, z], got all zeros")

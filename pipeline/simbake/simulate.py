@@ -46,12 +46,16 @@ def build_world(scene: Scene, assets: list[BodyAsset]) -> "_core.World":
         volume = asset.mass_properties["volume"]
         mass = body.mass if body.mass is not None else body.density * volume
         try:
-            world.add_body(asset.level_set, asset.vertices, asset.mass_properties, mass,
+            world.add_body(asset.level_set, asset.samples, asset.mass_properties, mass,
                            np.array(body.position), np.array(body.orientation),
                            np.array(body.linear_velocity), np.array(body.angular_velocity),
                            body.friction, body.restitution, body.kinematic)
         except ValueError as error:
             raise SceneError(scene.source, f"bodies[{index}]", str(error)) from None
+        if body.keys:
+            world.set_kinematic_track(index, [k.time for k in body.keys],
+                                      np.array([k.position for k in body.keys]),
+                                      np.array([k.orientation for k in body.keys]))
     return world
 
 
@@ -83,7 +87,8 @@ def bake(scene: Scene, output: str | Path, *,
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                  face_vertex_indices=asset.triangles.reshape(-1), normals=asset.normals,
-                 dynamic=not body.kinematic or any(body.linear_velocity) or any(body.angular_velocity))
+                 dynamic=(not body.kinematic or bool(body.keys) or any(body.linear_velocity)
+                          or any(body.angular_velocity)))
         for body, asset in zip(scene.bodies, assets)
     ]
     frame_dt = 1.0 / scene.fps

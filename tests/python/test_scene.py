@@ -384,6 +384,17 @@ BAD_CASES = [
     ("mesh-empty-string", body("", 'mesh = ""'), "bodies[0].mesh", "empty"),
     ("cloth-mesh-missing", cloth("", 'mesh = "flag.obj"'), "cloths[0].mesh", "not found"),
     ("invalid-toml", "[scene\nend_frame = 10\n", "", "invalid TOML"),
+    # keyed kinematic bodies
+    ("keys-on-dynamic-body", body("keys = [{ time = 0.0 }]"), "bodies[0].keys", "kinematic"),
+    ("keys-not-increasing", body("kinematic = true\nkeys = [{ time = 1.0 }, { time = 1.0 }]"),
+     "bodies[0].keys[1].time", "later"),
+    ("keys-empty", body("kinematic = true\nkeys = []"), "bodies[0].keys", "at least one"),
+    ("key-without-time", body("kinematic = true\nkeys = [{ position = [0, 1, 0] }]"),
+     "bodies[0].keys[0].time", "missing"),
+    ("key-unknown-field", body("kinematic = true\nkeys = [{ time = 0.0, frame = 3 }]"),
+     "bodies[0].keys[0].frame", "unknown"),
+    ("key-bad-orientation", body("kinematic = true\nkeys = [{ time = 0.0, orientation = [0, 0, 0, 0] }]"),
+     "bodies[0].keys[0].orientation", "non-zero"),
     ("duplicate-toml-key", "[scene]\nend_frame = 10\nend_frame = 11\n", "", "invalid TOML"),
 ]
 
@@ -508,3 +519,13 @@ def test_scene_dataclass_is_keyword_only_with_defaults(tmp_path):
     scene = Scene(path=tmp_path / "x.toml", end_frame=3)
     assert (scene.fps, scene.start_frame, scene.frame_count) == (24.0, 1, 3)
     assert scene.ground is None and scene.bodies == () and scene.cloths == ()
+
+
+def test_keys_default_to_the_body_pose(in_tmp):
+    write(in_tmp / "keys.toml", body(
+        'kinematic = true\nposition = [1, 2, 3]\norientation = [0, 1, 0, 0]\n'
+        'keys = [{ time = 0.5 }, { time = 2.0, position = [4, 2, 3], orientation = [2, 0, 0, 0] }]'))
+    keys = load_scene("keys.toml").bodies[0].keys
+    assert [k.time for k in keys] == [0.5, 2.0]
+    assert keys[0].position == (1.0, 2.0, 3.0) and keys[0].orientation == (0.0, 1.0, 0.0, 0.0)
+    assert keys[1].position == (4.0, 2.0, 3.0) and keys[1].orientation == (1.0, 0.0, 0.0, 0.0)
