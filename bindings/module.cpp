@@ -120,7 +120,7 @@ PYBIND11_MODULE(_core, m) {
   // the world
   py::class_<World>(m, "World")
       .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
-                       double travel_fraction, int max_substeps) {
+                       double travel_fraction, int max_substeps, int threads) {
              WorldSettings s;
              s.gravity = gravity;
              s.collision_sweeps = collision_sweeps;
@@ -128,6 +128,7 @@ PYBIND11_MODULE(_core, m) {
              s.max_substep = max_substep;
              s.travel_fraction = travel_fraction;
              s.max_substeps = max_substeps;
+             s.threads = threads;
              return World(s);
            }),
            py::arg("gravity") = WorldSettings().gravity,
@@ -135,7 +136,8 @@ PYBIND11_MODULE(_core, m) {
            py::arg("contact_sweeps") = WorldSettings().contact_sweeps,
            py::arg("max_substep") = WorldSettings().max_substep,
            py::arg("travel_fraction") = WorldSettings().travel_fraction,
-           py::arg("max_substeps") = WorldSettings().max_substeps)
+           py::arg("max_substeps") = WorldSettings().max_substeps,
+           py::arg("threads") = WorldSettings().threads)
       .def("set_ground", [](World& w, double height, double friction, double restitution) {
              w.set_ground(GroundDef{height, friction, restitution});
            }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)

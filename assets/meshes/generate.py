@@ -47,8 +47,39 @@ def l_prism(outline, depth: float):
     return vertices, np.array(faces)
 
 
+def cube_sphere(radius: float, subdivisions: int):
+    """A cube whose faces are split into s x s quads, projected onto the sphere."""
+    s = subdivisions
+    index: dict[tuple[int, int, int], int] = {}
+    vertices: list[np.ndarray] = []
+    faces = []
+
+    def vertex(key):
+        if key not in index:
+            index[key] = len(vertices)
+            cube = np.array(key, dtype=float) * (2.0 / s) - 1.0
+            vertices.append(radius * cube / np.linalg.norm(cube))
+        return index[key]
+
+    for a in range(3):
+        for side in (0, 1):
+            u, v = (a + 1) % 3, (a + 2) % 3
+            if side == 0:
+                u, v = v, u
+            for i in range(s):
+                for j in range(s):
+                    def corner(di, dj):
+                        key = [0, 0, 0]
+                        key[a], key[u], key[v] = side * s, i + di, j + dj
+                        return vertex(tuple(key))
+                    p00, p10, p11, p01 = corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)
+                    faces += [(p00, p10, p11), (p00, p11, p01)]
+    return np.array(vertices), np.array(faces)
+
+
 def main() -> None:
     write_obj(HERE / "torus.obj", *torus(0.3, 0.1, 32, 16))
+    write_obj(HERE / "sphere.obj", *cube_sphere(0.2, 6))
     # an L of two 0.2 m thick legs, 0.6 m tall and 0.4 m wide, centred on its bounding box
     outline = np.array([(0.0, 0.0), (0.4, 0.0), (0.4, 0.2), (0.2, 0.2), (0.2, 0.6), (0.0, 0.6)])
     write_obj(HERE / "lshape.obj", *l_prism(outline - (0.2, 0.3), 0.2))

@@ -22,6 +22,8 @@
 #include "rigid/impulse.h"
 #include "world/world.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -80,7 +82,7 @@ Vec3 World::point_velocity(int i, const Vec3& x) const {
 // Narrow phase: the samples of body a tested against b's level set at the candidates.
 // The normal is b's level-set gradient turned into world space with b's candidate rotation.
 
-void World::find_penetrations(int a, int b, bool only_approaching, std::vector<Penetration>& out) const {
+void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const {
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
   const Pose& pose_a = candidate_poses_[a];
   const Points& samples = defs_[a].samples;
@@ -118,11 +120,7 @@ void World::find_penetrations(int a, int b, bool only_approaching, std::vector<P
       if (phi >= -kTouching) continue;
       n = pose_b.rotation * n_local;
     }
-    const Vec3 x = pose_a.apply(m);
-    // approaching faster than the contact solver's tolerance: slower is resting contact
-    if (only_approaching &&
-        (point_velocity(a, x) - point_velocity(b, x)).dot(n) >= -settings_.contact_tolerance) continue;
-    out.push_back({a, b, x, n, phi, static_cast<int>(s)});
+    out.push_back({a, b, pose_a.apply(m), n, phi, static_cast<int>(s)});
   }
 }
 
@@ -188,7 +186,11 @@ void deterministic_shuffle(std::vector<int>& order, std::uint64_t seed) {
 void World::resolve_collisions(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/true, /*average_velocities=*/false);
   std::vector<int> order(pairs_.size());
-  std::vector<Penetration>& found = scratch_;
+  // the first sweep runs the full narrow phase and remembers, per pair, every sample found
+  // inside the other body; later sweeps re-test only those (the candidates move little within
+  // a step, so a sample outside at the first sweep stays outside)
+  std::vector<std::vector<Penetration>>& inside = pair_scratch_;
+  find_pair_penetrations(inside);
   // sweep in which each body last took an impulse: after the first sweep only pairs with a
   // body that changed since the pair was last looked at can have anything new to offer
   std::vector<int>& changed = body_scratch_;
@@ -200,14 +202,18 @@ void World::resolve_collisions(double dt) {
     bool any = false;
     for (int index : order) {
       const BodyPair& pair = pairs_[index];
+      std::vector<Penetration>& found = inside[index];
       if (sweep > 0 && !changed_since(pair.a, sweep) && !changed_since(pair.b, sweep)) continue;
-      found.clear();
-      find_penetrations(pair.a, pair.b, true, found);
-      if (pair.b != kGround) find_penetrations(pair.b, pair.a, true, found);
-      if (found.empty()) continue;
-      const auto deepest = std::min_element(found.begin(), found.end(),
-          [](const Penetration& l, const Penetration& r) { return l.phi < r.phi; });
-      if (!apply_collision_impulse(*deepest, pair.restitution, pair.friction)) continue;
+      // the deepest point still inside and approaching faster than the contact tolerance
+      const Penetration* deepest = nullptr;
+      for (Penetration& p : found) {
+        if (sweep > 0) refresh_contact(p);
+        if (p.phi >= -kTouching) continue;
+        const double approach = (point_velocity(p.a, p.x) - point_velocity(p.b, p.x)).dot(p.n);
+        if (approach >= -settings_.contact_tolerance) continue;
+        if (deepest == nullptr || p.phi < deepest->phi) deepest = &p;
+      }
+      if (deepest == nullptr || !apply_collision_impulse(*deepest, pair.restitution, pair.friction)) continue;
       any = true;
       changed[pair.a] = sweep;
       if (pair.b != kGround) changed[pair.b] = sweep;
@@ -304,22 +310,40 @@ void World::reduce_contact_points(std::vector<Penetration>& points, std::size_t 
 
 bool World::deeper(const Penetration& l, const Penetration& r) { return l.phi < r.phi; }
 
+// Every pair's penetrating samples, both directions (pair order, then sample order). Pairs
+// are independent and read-only here, so they run in parallel; each writes only its own list,
+// so the result is the same for any number of threads.
+void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const {
+  out.resize(pairs_.size());
+  tbb::parallel_for(std::size_t(0), pairs_.size(), [&](std::size_t k) {
+    out[k].clear();
+    find_penetrations(pairs_[k].a, pairs_[k].b, out[k]);
+    if (pairs_[k].b != kGround) find_penetrations(pairs_[k].b, pairs_[k].a, out[k]);
+  });
+}
+
 void World::find_contacts() {
+  // per pair: each direction deepest first and reduced, then the pair's points deepest first
+  std::vector<std::vector<Penetration>>& found = pair_scratch_;
+  find_pair_penetrations(found);
+  tbb::parallel_for(std::size_t(0), found.size(), [&](std::size_t k) {
+    std::vector<Penetration>& points = found[k];
+    const auto reverse = std::stable_partition(points.begin(), points.end(),
+                                               [&](const Penetration& p) { return p.a == pairs_[k].a; });
+    const std::size_t split = reverse - points.begin();
+    std::stable_sort(points.begin(), points.begin() + split, deeper);
+    std::stable_sort(points.begin() + split, points.end(), deeper);
+    std::vector<Penetration> second(points.begin() + split, points.end());
+    points.resize(split);
+    reduce_contact_points(points, 0);
+    reduce_contact_points(second, 0);
+    points.insert(points.end(), second.begin(), second.end());
+    std::stable_sort(points.begin(), points.end(), deeper);
+  });
   contacts_.clear();
-  for (const BodyPair& pair : pairs_) {
-    scratch_.clear();
-    find_penetrations(pair.a, pair.b, false, scratch_);
-    std::stable_sort(scratch_.begin(), scratch_.end(), deeper);
-    reduce_contact_points(scratch_, 0);
-    if (pair.b != kGround) {
-      const std::size_t reverse = scratch_.size();
-      find_penetrations(pair.b, pair.a, false, scratch_);
-      std::stable_sort(scratch_.begin() + reverse, scratch_.end(), deeper);
-      reduce_contact_points(scratch_, reverse);
-    }
-    std::stable_sort(scratch_.begin(), scratch_.end(), deeper);
-    for (const Penetration& p : scratch_) {
-      ContactPoint contact{p, pair.friction};
+  for (std::size_t k = 0; k < found.size(); ++k) {
+    for (const Penetration& p : found[k]) {
+      ContactPoint contact{p, pairs_[k].friction};
       if (p.a != kGround && !defs_[p.a].kinematic) {
         contact.k_a = impulse_matrix(defs_[p.a].inverse_mass, inverse_inertia_[p.a], p.x - candidates_[p.a].x);
       }

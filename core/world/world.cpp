@@ -3,10 +3,12 @@
 #include "world/world.h"
 
 #include <Eigen/Eigenvalues>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -40,6 +42,7 @@ World::World(const WorldSettings& settings) : settings_(settings) {
   require(settings.collision_sweeps >= 0 && settings.contact_sweeps >= 0, "sweeps must be >= 0");
   require(settings.max_substep > 0.0 && settings.travel_fraction > 0.0, "substep limits must be > 0");
   require(settings.max_substeps >= 1, "max_substeps must be >= 1");
+  require(settings.threads >= 0, "threads must be >= 0");
 }
 
 void World::set_ground(const GroundDef& ground) {
@@ -149,9 +152,13 @@ void World::move_kinematic_bodies(double dt) {
 
 int World::automatic_substeps(double frame_dt) const {
   // Each body may travel a fraction of its thickness per substep (no tunnelling through its
-  // thinnest part); its speed over the frame is bounded by the current speed of its fastest
-  // point plus what gravity adds in one frame.
+  // own thinnest part), nor more than twice that fraction of the scene's thinnest body (no
+  // tunnelling through a thin post or plate); its speed over the frame is bounded by the
+  // current speed of its fastest point plus what gravity adds in one frame.
   double steps = std::ceil(frame_dt / settings_.max_substep);
+  // no body may pass through the thinnest body of the scene either
+  double thinnest = std::numeric_limits<double>::infinity();
+  for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);
   for (int i = 0; i < body_count(); ++i) {
     if (asleep_[i]) continue;
     const RigidBodyDef& def = defs_[i];
@@ -165,7 +172,8 @@ int World::automatic_substeps(double frame_dt) const {
       speed = std::max(speed, ((o1 - o0).norm() + q1.angularDistance(q0) * (def.bounding_radius + def.center.norm())) / frame_dt);
     }
     if (!def.kinematic) speed += settings_.gravity.norm() * frame_dt;
-    steps = std::max(steps, std::ceil(speed * frame_dt / (settings_.travel_fraction * def.thickness)));
+    const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
+    steps = std::max(steps, std::ceil(speed * frame_dt / limit));
   }
   if (!std::isfinite(steps)) return settings_.max_substeps;
   return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
@@ -175,11 +183,14 @@ int World::step_frame(double frame_dt, int substeps) {
   require(frame_dt > 0.0 && std::isfinite(frame_dt), "frame_dt must be > 0");
   const int n = std::min(substeps > 0 ? substeps : automatic_substeps(frame_dt), settings_.max_substeps);
   const double dt = frame_dt / n;
-  for (int k = 0; k < n && stats_.finite; ++k) {
-    step(dt);
-    // a NaN is caught at once and reported, never stepped on
-    if (!check_finite()) stats_.finite = false;
-  }
+  tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    for (int k = 0; k < n && stats_.finite; ++k) {
+      step(dt);
+      // a NaN is caught at once and reported, never stepped on
+      if (!check_finite()) stats_.finite = false;
+    }
+  });
   {
     ScopedTimer timer(profile_.statistics);
     gather_statistics();

@@ -44,6 +44,8 @@ struct WorldSettings {
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
                                          // more than this fraction of its thickness
   int max_substeps = 4096;               // per frame, automatic or not
+  int threads = 0;                       // worker threads for the narrow phase; 0 = all cores.
+                                         // Results are identical for any count.
 };
 
 struct GroundDef {
@@ -171,10 +173,11 @@ class World {
   void update_candidate(int i);
   void refresh_stale_candidates();
   Vec3 point_velocity(int i, const Vec3& x) const;
-  void find_penetrations(int a, int b, bool only_approaching, std::vector<Penetration>& out) const;
+  void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
+  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
   void find_contacts();
   static void reduce_to_four(std::vector<Penetration>& points);
   static void reduce_contact_points(std::vector<Penetration>& points, std::size_t begin);
@@ -210,6 +213,7 @@ class World {
   std::vector<Penetration> scratch_;        // reused by the impulse stages
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
+  std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
   double dt_ = 0.0;                         // current substep (s)
   double time_ = 0.0;                       // simulated time at the start of the step (s)
   bool candidates_with_forces_ = false;     // collision stage: candidates include gravity

@@ -129,7 +129,20 @@ def check_voxel_count(vertices: np.ndarray, voxel_size: float, file: str | Path,
                                     f"(at most {MAX_VOXELS:.0e}); use a larger voxel size")
 
 
-def load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> BodyAsset:
+def load_body(scene: Scene, index: int, body: Body, with_level_set: bool,
+              shared: dict | None = None) -> BodyAsset:
+    """One body's geometry; `shared` maps (mesh file, voxel size) to an asset already loaded
+    for another body, so a pile of copies of one mesh holds one grid, not one per body."""
+    memo_key = (body.shape.mesh_path, body.voxel_size, with_level_set) if body.shape.kind == "mesh" else None
+    if shared is not None and memo_key in shared:
+        return shared[memo_key]
+    asset = _load_body(scene, index, body, with_level_set)
+    if shared is not None and memo_key is not None:
+        shared[memo_key] = asset
+    return asset
+
+
+def _load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> BodyAsset:
     key = f"bodies[{index}]"
     file = scene.source or str(scene.path)
     shape = body.shape
@@ -162,4 +175,5 @@ def load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bod
 
 
 def load_assets(scene: Scene) -> list[BodyAsset]:
-    return [load_body(scene, i, body, needs_level_set(scene, i)) for i, body in enumerate(scene.bodies)]
+    shared: dict = {}
+    return [load_body(scene, i, body, needs_level_set(scene, i), shared) for i, body in enumerate(scene.bodies)]
