@@ -50,6 +50,17 @@ MassProperties mass_from_dict(const py::dict& d) {
 
 Quat quat_wxyz(const Eigen::Vector4d& q) { return Quat(q[0], q[1], q[2], q[3]); }
 
+// The enum value named by `name`, or ValueError listing the choices
+template <class Enum>
+Enum choose(const std::string& name, std::initializer_list<std::pair<const char*, Enum>> choices) {
+  std::string names;
+  for (const auto& [key, value] : choices) {
+    if (name == key) return value;
+    names += std::string(names.empty() ? "" : ", ") + key;
+  }
+  throw std::invalid_argument("unknown choice '" + name + "' (choose " + names + ")");
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -163,6 +174,40 @@ PYBIND11_MODULE(_core, m) {
            py::arg("origin"), py::arg("orientation"), py::arg("linear_velocity") = Vec3::Zero(),
            py::arg("angular_velocity") = Vec3::Zero(), py::arg("friction") = 0.5,
            py::arg("restitution") = 0.0, py::arg("kinematic") = false)
+      .def("add_cloth", [](World& w, const Points& rest, const Triangles& triangles, double area_density,
+                           const std::string& model, double stretch_stiffness, double poisson_ratio,
+                           double bend_stiffness, double damping, double strain_limit, const std::string& compression,
+                           const std::vector<int>& pinned, const std::string& integrator, double friction,
+                           double thickness) {
+             ClothDesc d;
+             d.rest = rest;
+             d.triangles = triangles;
+             d.area_density = area_density;
+             d.material.model = choose<InPlaneModel>(model, {{"springs", InPlaneModel::kSprings}, {"membrane", InPlaneModel::kMembrane}});
+             d.material.stretch_stiffness = stretch_stiffness;
+             d.material.poisson_ratio = poisson_ratio;
+             d.material.bend_stiffness = bend_stiffness;
+             d.material.damping = damping;
+             d.material.strain_limit = strain_limit;
+             d.material.compression = choose<CompressionMode>(compression, {{"subgrid", CompressionMode::kSubgrid},
+                                                                            {"enforce", CompressionMode::kEnforce},
+                                                                            {"none", CompressionMode::kNone}});
+             d.pinned = pinned;
+             d.integrator = choose<ClothIntegrator>(integrator, {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}});
+             return w.add_cloth(d, friction, thickness);
+           },
+           py::arg("rest"), py::arg("triangles"), py::arg("area_density") = 0.1, py::arg("model") = "springs",
+           py::arg("stretch_stiffness") = 1000.0, py::arg("poisson_ratio") = 0.3, py::arg("bend_stiffness") = 1e-4,
+           py::arg("damping") = 0.01, py::arg("strain_limit") = 0.1, py::arg("compression") = "subgrid",
+           py::arg("pinned") = std::vector<int>(), py::arg("integrator") = "implicit", py::arg("friction") = 0.3,
+           py::arg("thickness") = 0.005)
+      .def_property_readonly("cloth_count", &World::cloth_count)
+      .def("cloth_state", [](const World& w, int i) {
+             if (i < 0 || i >= w.cloth_count()) throw py::index_error("cloth index out of range");
+             const Cloth& c = w.cloth(i);
+             return py::make_tuple(c.positions(), c.velocities(), c.vertex_normals());
+           }, py::arg("index"), "Positions (n, 3), velocities (n, 3) and vertex normals (n, 3) of cloth i")
+      .def("cloth_max_strain", [](const World& w, int i) { return w.cloth(i).max_strain(); }, py::arg("index"))
       .def("set_kinematic_track", [](World& w, int i, const std::vector<double>& times, const Points& origins,
                                       const Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>& orientations) {
              if (origins.rows() != static_cast<Eigen::Index>(times.size()) || orientations.rows() != origins.rows()) {
@@ -216,6 +261,9 @@ PYBIND11_MODULE(_core, m) {
              d["potential_energy"] = s.potential_energy;
              d["impulses"] = s.impulses;
              d["finite"] = s.finite;
+             d["elastic_energy"] = s.elastic_energy;
+             d["cloth_penetration"] = s.cloth_penetration;
+             d["max_cloth_strain"] = s.max_cloth_strain;
              return d;
            })
       .def("profile", [](const World& w) {
@@ -228,6 +276,7 @@ PYBIND11_MODULE(_core, m) {
              d["shock_propagation"] = p.shock_propagation;
              d["positions"] = p.positions;
              d["sleeping"] = p.sleeping;
+             d["cloths"] = p.cloths;
              d["statistics"] = p.statistics;
              return d;
            });

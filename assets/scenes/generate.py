@@ -112,9 +112,72 @@ def ring_toss() -> str:
     return text
 
 
+def cloth(name: str, size, resolution, position, **extra) -> str:
+    lines = [f'\n[[cloths]]\nname = "{name}"',
+             f"grid = {{ size = {vec(size)}, resolution = [{resolution[0]}, {resolution[1]}] }}",
+             f"position = {vec(position)}"]
+    for key, value in extra.items():
+        if isinstance(value, str):
+            lines.append(f'{key} = "{value}"')
+        elif isinstance(value, (tuple, list)):
+            lines.append(f"{key} = [" + ", ".join(str(v) for v in value) + "]")
+        else:
+            lines.append(f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+def drape() -> str:
+    text = header("A 2 m square cloth (64 x 64) draped over a sphere and onto the ground.", 73)
+    text += body("ball", 'shape = { type = "sphere", radius = 0.5 }', (0, 0.5, 0), kinematic=True, friction=0.5)
+    text += cloth("sheet", (2.0, 2.0), (64, 64), (0, 1.2, 0), stretch_stiffness=2000.0, friction=0.4)
+    return text
+
+
+def flag() -> str:
+    nx, nz = 48, 32
+    text = header("A flag pinned along its pole edge, falling and swinging under gravity.", 97)
+    text += body("pole", box((0.04, 3.0, 0.04)), (-0.77, 1.5, 0), kinematic=True)
+    # the grid stands in the XY plane: turned 90 degrees about x, so grid z becomes -y
+    pinned = [j * nx for j in range(nz)]
+    text += cloth("flag", (1.5, 1.0), (nx, nz), (0, 2.4, 0), orientation=(0.7071068, 0.7071068, 0, 0),
+                  pinned=pinned, area_density=0.15, stretch_stiffness=1500.0)
+    return text
+
+
+def tablecloth() -> str:
+    text = header("A tablecloth dropped off-centre on a table; the overhanging side drags it off.", 97)
+    text += body("table", box((1.2, 0.75, 0.8)), (0, 0.375, 0), kinematic=True, friction=0.2)
+    text += cloth("tablecloth", (1.6, 1.2), (64, 48), (0.75, 0.8, 0), friction=0.2, area_density=0.2)
+    return text
+
+
+def cape_on_mover() -> str:
+    text = header("A cape (pinned to nothing) draped on a keyed body that moves and turns.", 121)
+    keys = ("[{ time = 0.0 }, { time = 1.0 }, { time = 2.5, position = [1.5, 1.2, 0.0], "
+            "orientation = [0.7071068, 0.0, 0.7071068, 0.0] }, { time = 4.0, position = [3.0, 1.2, 1.0], "
+            "orientation = [0.0, 0.0, 1.0, 0.0] }]")
+    text += (body("mover", box((0.5, 0.8, 0.3)), (0, 1.2, 0), kinematic=True, friction=0.8)
+             .rstrip("\n") + f"\nkeys = {keys}\n")
+    text += cloth("cape", (1.0, 1.0), (40, 40), (0, 1.75, 0), friction=0.8, area_density=0.2)
+    return text
+
+
+def cloth_demo() -> str:
+    rng = random.Random(11)
+    text = header("Cloth and rigid bodies together: a sheet falls on tumbling shapes.", 97)
+    for i in range(5):
+        shape = box((0.4, 0.4, 0.4)) if i % 2 else 'shape = { type = "sphere", radius = 0.25 }'
+        text += body(f"body{i}", shape, (rng.uniform(-0.6, 0.6), 0.4 + 0.5 * i, rng.uniform(-0.6, 0.6)),
+                     angular_velocity=tuple(rng.uniform(-3, 3) for _ in range(3)), density=300.0)
+    text += body("ring", 'mesh = "../meshes/torus.obj"', (0.0, 3.2, 0.0), density=400.0)
+    text += cloth("sheet", (2.4, 2.4), (48, 48), (0, 3.6, 0), friction=0.4)
+    return text
+
+
 def main() -> None:
     for name, make in [("tower", tower), ("pyramid", pyramid), ("dominoes", dominoes), ("pile", pile),
-                       ("ring_toss", ring_toss)]:
+                       ("ring_toss", ring_toss), ("drape", drape), ("flag", flag), ("tablecloth", tablecloth),
+                       ("cape_on_mover", cape_on_mover), ("cloth_demo", cloth_demo)]:
         (HERE / f"{name}.toml").write_text(make())
 
 

@@ -175,6 +175,18 @@ int World::automatic_substeps(double frame_dt) const {
     const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
     steps = std::max(steps, std::ceil(speed * frame_dt / limit));
   }
+  // cloth: the explicit integrator's speed-of-sound limit, and no vertex crossing more than
+  // the travel fraction of the thinnest body in a substep
+  for (const Cloth& cloth : cloths_) {
+    if (cloth.integrator() == ClothIntegrator::kExplicit) {
+      steps = std::max(steps, std::ceil(frame_dt / cloth.stable_explicit_step()));
+    }
+    if (body_count() == 0) continue;
+    double fastest = 0.0;
+    for (int k = 0; k < cloth.vertex_count(); ++k) fastest = std::max(fastest, cloth.velocities().row(k).norm());
+    fastest += settings_.gravity.norm() * frame_dt;
+    steps = std::max(steps, std::ceil(fastest * frame_dt / (settings_.travel_fraction * thinnest)));
+  }
   if (!std::isfinite(steps)) return settings_.max_substeps;
   return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
 }
@@ -207,6 +219,7 @@ void World::step(double dt) {
   { ScopedTimer timer(profile_.shock_propagation); propagate_shocks(); }
   { ScopedTimer timer(profile_.positions); update_positions(dt); }
   { ScopedTimer timer(profile_.sleeping); update_sleeping(dt); }
+  { ScopedTimer timer(profile_.cloths); step_cloths(dt); }
   time_ += dt;
   ++stats_.substeps;
 }
@@ -214,6 +227,9 @@ void World::step(double dt) {
 bool World::check_finite() const {
   for (const RigidBodyState& s : states_) {
     if (!(s.x.allFinite() && s.v.allFinite() && s.l.allFinite() && s.q.coeffs().allFinite())) return false;
+  }
+  for (const Cloth& c : cloths_) {
+    if (!(c.positions().allFinite() && c.velocities().allFinite())) return false;
   }
   return true;
 }
@@ -225,9 +241,19 @@ void World::gather_statistics() {
     kinetic += kinetic_energy(defs_[i], states_[i]);
     potential -= settings_.gravity.dot(states_[i].x) / defs_[i].inverse_mass;
   }
+  double elastic = 0.0, strain = 0.0;
+  for (const Cloth& c : cloths_) {
+    kinetic += c.kinetic_energy();
+    potential += c.potential_energy(settings_.gravity);
+    elastic += c.elastic_energy();
+    strain = std::max(strain, c.max_strain());
+  }
   stats_.kinetic_energy = kinetic;
   stats_.potential_energy = potential;
+  stats_.elastic_energy = elastic;
+  stats_.max_cloth_strain = strain;
   stats_.max_penetration = max_penetration();
+  stats_.cloth_penetration = cloth_penetration();
 }
 
 double World::max_penetration() const {

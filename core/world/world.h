@@ -14,9 +14,14 @@
 //                      shock propagation: the contact graph solved level by level from the
 //                      ground up, each level resting on the frozen levels below
 //   update_positions   x += dt v; q by the torque-free rotation with L fixed
+//   step_cloths        per cloth: internal forces and velocity update, collisions with every
+//                      body's level set and the ground (thickness, Coulomb friction on the
+//                      relative velocity, equal and opposite impulses on dynamic bodies),
+//                      strain limiting and compression impulses, collisions again, positions
 // Statistics (energy, penetration, substeps) are gathered once per frame.
 #pragma once
 
+#include "cloth/cloth.h"
 #include "geometry/mass_properties.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
@@ -73,7 +78,11 @@ struct BodyDesc {
 struct StepStatistics {
   long long substeps = 0;          // substeps taken since the world was built
   double max_penetration = 0.0;    // deepest sample inside another body or the ground (m), last frame
-  double kinetic_energy = 0.0;     // (J), now
+  double kinetic_energy = 0.0;     // (J), now, bodies and cloths
+  double elastic_energy = 0.0;     // cloths' stretch and bending energy (J), now
+  double cloth_penetration = 0.0;  // deepest cloth vertex inside a body or the ground, past its
+                                   // surface (m), last frame; the thickness is not counted
+  double max_cloth_strain = 0.0;   // largest edge strain of any cloth, last frame
   double potential_energy = 0.0;   // gravity, -m g.x (J), now
   long long impulses = 0;          // collision and contact impulses applied, in total
   bool finite = true;              // false once any state went NaN or infinite
@@ -88,6 +97,7 @@ struct StageProfile {
   double shock_propagation = 0.0;
   double positions = 0.0;
   double sleeping = 0.0;
+  double cloths = 0.0;
   double statistics = 0.0;
 };
 
@@ -98,6 +108,12 @@ class World {
   void set_ground(const GroundDef& ground);
   // Validates and adds a body; returns its index (bodies are addressed by index)
   int add_body(const BodyDesc& desc);
+  // Adds a cloth that collides with every body and the ground with this friction and keeps
+  // this thickness (m) from their surfaces; returns its index
+  int add_cloth(const ClothDesc& desc, double friction, double thickness);
+  int cloth_count() const { return static_cast<int>(cloths_.size()); }
+  const Cloth& cloth(int i) const { return cloths_[i]; }
+  Cloth& cloth(int i) { return cloths_[i]; }
   // Makes kinematic body i follow a key track from now on (time 0 is when the world starts)
   void set_kinematic_track(int i, KinematicTrack track);
   double time() const { return time_; }  // (s) simulated so far
@@ -154,6 +170,7 @@ class World {
   void move_kinematic_bodies(double dt);
   void broad_phase(double dt);
   void update_sleeping(double dt);
+  void step_cloths(double dt);
   void resolve_collisions(double dt);
   void update_velocities(double dt);
   void resolve_contacts(double dt);
@@ -167,6 +184,8 @@ class World {
   void compute_boxes(double dt);
   void overlapping_pairs(std::vector<std::pair<int, int>>& out) const;
   bool touching(int mover, int sleeper, double dt) const;
+  void collide_cloth(int c, double dt);
+  double cloth_penetration() const;
   int find_island(int i);
   void wake_island(int i);
   void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
@@ -209,6 +228,9 @@ class World {
   std::vector<double> rest_time_;           // (nbody) time spent resting so far (s)
   std::vector<RigidBodyState> rest_pose_;   // (nbody) where the current rest began
   std::vector<int> island_;                 // (nbody) union-find parent; for sleepers, their island
+  std::vector<Cloth> cloths_;               // (ncloth) cloths and their state
+  std::vector<double> cloth_friction_;      // (ncloth) Coulomb coefficient against bodies and ground
+  std::vector<double> cloth_thickness_;     // (ncloth) distance kept from surfaces (m)
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<Penetration> scratch_;        // reused by the impulse stages
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage

@@ -177,3 +177,62 @@ def _load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bo
 def load_assets(scene: Scene) -> list[BodyAsset]:
     shared: dict = {}
     return [load_body(scene, i, body, needs_level_set(scene, i), shared) for i, body in enumerate(scene.bodies)]
+
+
+# --------------------------------------------------------------------------------------------
+# Cloth
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ClothAsset:
+    """A cloth's rest shape, placed in the world (its initial state)."""
+
+    vertices: np.ndarray   # (n, 3) float64 world positions (m)
+    triangles: np.ndarray  # (m, 3) int32
+
+
+def grid_mesh(size: tuple[float, float], resolution: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """A regular grid in the XZ plane centred on the origin, normals +y. Vertex (i, j), i along
+    x and j along z, has index j * nx + i; vertex 0 is the (-x, -z) corner."""
+    nx, nz = resolution
+    i, j = np.meshgrid(np.arange(nx), np.arange(nz), indexing="xy")  # (nz, nx): row j, column i
+    x = (i / (nx - 1) - 0.5) * size[0]
+    z = (j / (nz - 1) - 0.5) * size[1]
+    vertices = np.stack([x, np.zeros_like(x), z], axis=-1).reshape(-1, 3)
+    p00 = (j[:-1, :-1] * nx + i[:-1, :-1]).ravel()
+    p10, p01, p11 = p00 + 1, p00 + nx, p00 + nx + 1
+    # (p00, p01, p11) and (p00, p11, p10) wind counter-clockwise seen from +y
+    triangles = np.concatenate([np.stack([p00, p01, p11], -1), np.stack([p00, p11, p10], -1)])
+    return vertices.astype(np.float64), triangles.astype(np.int32)
+
+
+def _rotate(q: tuple[float, float, float, float], points: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return points @ R.T
+
+
+def load_cloth(scene: Scene, index: int) -> ClothAsset:
+    import trimesh
+
+    cloth = scene.cloths[index]
+    key, file = f"cloths[{index}]", scene.source or str(scene.path)
+    if cloth.mesh_path is not None:
+        try:
+            # process=False keeps the file's vertex order: `pinned` indexes the file's vertices
+            mesh = trimesh.load(str(cloth.mesh_path), force="mesh", process=False)
+        except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
+            raise SceneError(file, f"{key}.mesh", f"cannot read mesh {cloth.mesh_path}: {error}") from None
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            raise SceneError(file, f"{key}.mesh", f"{cloth.mesh_path} holds no triangles")
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        triangles = np.asarray(mesh.faces, dtype=np.int32)
+    else:
+        vertices, triangles = grid_mesh(cloth.grid_size, cloth.grid_resolution)
+    bad = [p for p in cloth.pinned if p >= len(vertices)]
+    if bad:
+        raise SceneError(file, f"{key}.pinned", f"vertex {bad[0]} does not exist (the cloth has {len(vertices)})")
+    placed = _rotate(cloth.orientation, vertices) + np.asarray(cloth.position)
+    return ClothAsset(np.ascontiguousarray(placed), np.ascontiguousarray(triangles))

@@ -12,7 +12,8 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
                 keys = [{ time, position, orientation }, ...] (kinematic bodies only)
     [[cloths]]  name (required), grid = { size = [w, d], resolution = [nx, nz] } or mesh = "...",
                 position, orientation, area_density, stretch_stiffness, bend_stiffness,
-                damping, strain_limit, compression, friction, thickness, pinned
+                damping, strain_limit, compression, friction, thickness, pinned,
+                model (springs | membrane), poisson_ratio, integrator (implicit | explicit)
 
 The full reference, with defaults, is the section "Scene file (TOML), version 1" of
 DESIGN.md; the defaults here are the dataclass defaults below.
@@ -53,6 +54,8 @@ IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
 DEFAULT_DENSITY = 1000.0  # kg/m^3, used when a body gives neither density nor mass
 SHAPE_TYPES = ("sphere", "box")
 COMPRESSION_MODES = ("subgrid", "enforce", "none")
+CLOTH_MODELS = ("springs", "membrane")
+CLOTH_INTEGRATORS = ("implicit", "explicit")
 RESERVED_NAMES = ("World",)  # the root prim of every cache
 _PRIM_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
@@ -128,6 +131,9 @@ class Cloth:
     friction: float = 0.3
     thickness: float = 0.005
     pinned: tuple[int, ...] = ()
+    model: str = "springs"          # springs | membrane (StVK)
+    poisson_ratio: float = 0.3      # membrane only
+    integrator: str = "implicit"    # implicit (backward Euler) | explicit
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -197,7 +203,7 @@ _ANY_SHAPE_KEYS = ("type", "radius", "size")
 _CLOTH_KEYS = (
     "name", "grid", "mesh", "position", "orientation", "area_density",
     "stretch_stiffness", "bend_stiffness", "damping", "strain_limit", "compression",
-    "friction", "thickness", "pinned",
+    "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator",
 )  # fmt: skip
 _GRID_KEYS = ("size", "resolution")
 
@@ -356,7 +362,15 @@ def _cloth(t: _Table, base_dir: Path) -> Cloth:
         friction=t.number("friction", Cloth.friction, _at_least(0)),
         thickness=t.number("thickness", Cloth.thickness, _at_least(0)),
         pinned=t.integers("pinned", None, Cloth.pinned, _vertex_index(grid_resolution)),
+        model=t.string("model", Cloth.model, _one_of(CLOTH_MODELS)),
+        poisson_ratio=t.number("poisson_ratio", Cloth.poisson_ratio, _poisson),
+        integrator=t.string("integrator", Cloth.integrator, _one_of(CLOTH_INTEGRATORS)),
     )
+
+
+def _poisson(value: float) -> str | None:
+    return None if 0.0 <= value < 0.5 else f"must be in [0, 0.5), got {value}"
+
 
 
 def _orientation(t: _Table, default: Quat = IDENTITY) -> Quat:

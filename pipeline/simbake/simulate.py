@@ -15,11 +15,11 @@ from typing import Callable
 import numpy as np
 
 from . import _core, __version__
-from .assets import BodyAsset, load_assets
+from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import SceneError, SimulationError
 from .files import check_output_path
 from .scene import Scene
-from .usd_writer import BodyPrim, CacheWriter
+from .usd_writer import BodyPrim, CacheWriter, ClothPrim
 
 USD_SUFFIXES = (".usdc", ".usda", ".usd")
 
@@ -38,7 +38,8 @@ class BakeStats:
                 f"max penetration {self.max_penetration * 1000:.3f} mm -> {self.output}")
 
 
-def build_world(scene: Scene, assets: list[BodyAsset]) -> "_core.World":
+def build_world(scene: Scene, assets: list[BodyAsset],
+                cloths: list[ClothAsset] = ()) -> "_core.World":
     world = _core.World(gravity=np.array(scene.gravity))
     if scene.ground is not None:
         world.set_ground(scene.ground.height, scene.ground.friction, scene.ground.restitution)
@@ -56,6 +57,14 @@ def build_world(scene: Scene, assets: list[BodyAsset]) -> "_core.World":
             world.set_kinematic_track(index, [k.time for k in body.keys],
                                       np.array([k.position for k in body.keys]),
                                       np.array([k.orientation for k in body.keys]))
+    for index, (cloth, asset) in enumerate(zip(scene.cloths, cloths)):
+        try:
+            world.add_cloth(asset.vertices, asset.triangles, cloth.area_density, cloth.model,
+                            cloth.stretch_stiffness, cloth.poisson_ratio, cloth.bend_stiffness,
+                            cloth.damping, cloth.strain_limit, cloth.compression, list(cloth.pinned),
+                            cloth.integrator, cloth.friction, cloth.thickness)
+        except ValueError as error:
+            raise SceneError(scene.source, f"cloths[{index}]", str(error)) from None
     return world
 
 
@@ -78,11 +87,10 @@ def bake(scene: Scene, output: str | Path, *,
     """
     output = Path(output)
     check_output_path(output, USD_SUFFIXES)
-    if scene.cloths:
-        raise SceneError(scene.source, "cloths", "cloth simulation is not available in this version")
     start = time.perf_counter()
     assets = load_assets(scene)
-    world = build_world(scene, assets)
+    cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
+    world = build_world(scene, assets, cloths)
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
@@ -91,11 +99,14 @@ def bake(scene: Scene, output: str | Path, *,
                           or any(body.angular_velocity)))
         for body, asset in zip(scene.bodies, assets)
     ]
+    cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
+                             face_vertex_indices=asset.triangles.reshape(-1))
+                   for cloth, asset in zip(scene.cloths, cloths)]
     frame_dt = 1.0 / scene.fps
     total = scene.frame_count
     max_penetration = 0.0
     with CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
-                     bodies=prims, provenance=_provenance(scene)) as writer:
+                     bodies=prims, cloths=cloth_prims, provenance=_provenance(scene)) as writer:
         for frame in range(scene.start_frame, scene.end_frame + 1):
             if frame > scene.start_frame:
                 world.step_frame(frame_dt, scene.substeps)
@@ -103,9 +114,11 @@ def bake(scene: Scene, output: str | Path, *,
                 if not stats["finite"]:
                     raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
                                           "nothing was written (try more [solver] substeps)")
-                max_penetration = max(max_penetration, stats["max_penetration"])
+                max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
             translations, orientations = world.mesh_poses()
-            writer.write_frame(frame, translations, orientations)
+            states = [world.cloth_state(i) for i in range(len(cloths))]
+            writer.write_frame(frame, translations, orientations, cloth_points=[s[0] for s in states],
+                               cloth_velocities=[s[1] for s in states], cloth_normals=[s[2] for s in states])
             if on_frame:
                 on_frame(frame - scene.start_frame + 1, total)
     return BakeStats(output=output, frames=total, substeps=int(world.statistics()["substeps"]),

@@ -384,6 +384,10 @@ BAD_CASES = [
     ("mesh-empty-string", body("", 'mesh = ""'), "bodies[0].mesh", "empty"),
     ("cloth-mesh-missing", cloth("", 'mesh = "flag.obj"'), "cloths[0].mesh", "not found"),
     ("invalid-toml", "[scene\nend_frame = 10\n", "", "invalid TOML"),
+    # cloth models
+    ("cloth-unknown-model", cloth('model = "fem"'), "cloths[0].model", "one of"),
+    ("cloth-bad-poisson", cloth("poisson_ratio = 0.5"), "cloths[0].poisson_ratio", "[0, 0.5)"),
+    ("cloth-unknown-integrator", cloth('integrator = "rk4"'), "cloths[0].integrator", "one of"),
     # keyed kinematic bodies
     ("keys-on-dynamic-body", body("keys = [{ time = 0.0 }]"), "bodies[0].keys", "kinematic"),
     ("keys-not-increasing", body("kinematic = true\nkeys = [{ time = 1.0 }, { time = 1.0 }]"),

@@ -1,0 +1,87 @@
+// A triangle-mesh cloth: its constant description (topology, rest state, masses, material)
+// and its mutable state (positions and velocities), with the internal-force stages of the
+// world step. Collisions with bodies and the ground are the world's job (world/cloth_stages);
+// this class only knows the cloth itself.
+//
+// Stages the world calls, in order, each substep (DESIGN.md, "The world step", stage 6):
+//   update_velocities(dt, gravity)   forces (stretch/shear or membrane, bending, damping) and
+//                                    the velocity update: explicit or implicit (backward Euler)
+//   ... the world's collision impulses change v ...
+//   limit_strain(dt)                 impulses along over-stretched (and, per the compression
+//                                    mode, over-compressed) edges so that x + dt v respects them
+//   update_positions(dt)             x += dt v; pinned vertices stay where they are
+#pragma once
+
+#include "math/types.h"
+
+#include <vector>
+
+namespace simbake {
+
+enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
+enum class CompressionMode { kSubgrid, kEnforce, kNone };
+enum class ClothIntegrator { kExplicit, kImplicit };
+
+struct ClothMaterial {
+  InPlaneModel model = InPlaneModel::kSprings;
+  double stretch_stiffness = 1000.0;  // springs: E in W = 1/2 E (|A| - 1)^2 L (N); membrane: Young's modulus x thickness (N/m)
+  double poisson_ratio = 0.3;         // membrane only
+  double bend_stiffness = 1e-4;       // B (N m): bending energy density 1/2 B (1/R1 + 1/R2)^2
+  double damping = 0.01;              // Rayleigh stiffness-proportional damping coefficient (s)
+  double strain_limit = 0.1;          // largest stretch (|l| / L - 1) allowed; 0 disables
+  CompressionMode compression = CompressionMode::kSubgrid;
+  double subgrid_scale = 0.01;        // subgrid: stiffness multiplier under compression
+};
+
+struct ClothDesc {
+  Points rest;                        // (n x 3) rest positions = initial positions (m)
+  Triangles triangles;                // (m x 3)
+  double area_density = 0.1;          // (kg/m^2), lumped to vertices (a third of each triangle)
+  ClothMaterial material;
+  std::vector<int> pinned;            // vertices held fixed
+  ClothIntegrator integrator = ClothIntegrator::kImplicit;
+};
+
+class Cloth {
+ public:
+  explicit Cloth(const ClothDesc& desc);  // validates and builds edges, hinges, masses
+
+  // stages (see the top of this file)
+  void update_velocities(double dt, const Vec3& gravity);
+  void limit_strain(double dt);
+  void update_positions(double dt);
+
+  // the largest stable explicit substep (speed-of-sound limit) for the current material (s)
+  double stable_explicit_step() const;
+  // elastic energy (stretch + bending), kinetic energy, and gravity potential -m g.x (J)
+  double elastic_energy() const;
+  double kinetic_energy() const;
+  double potential_energy(const Vec3& gravity) const;
+  // largest edge strain |l| / L - 1 now
+  double max_strain() const;
+  // area-weighted vertex normals of the current shape (n x 3)
+  Points vertex_normals() const;
+
+  int vertex_count() const { return static_cast<int>(x_.rows()); }
+  const Triangles& triangles() const { return triangles_; }
+  const Eigen::VectorXd& masses() const { return mass_; }      // (n) lumped masses (kg)
+  const std::vector<char>& pinned() const { return pinned_; }  // (n) 1 if pinned
+  Points& positions() { return x_; }                            // (n x 3) (m)
+  const Points& positions() const { return x_; }
+  Points& velocities() { return v_; }                           // (n x 3) (m/s)
+  const Points& velocities() const { return v_; }
+  const ClothMaterial& material() const { return material_; }
+  ClothIntegrator integrator() const { return integrator_; }
+
+ private:
+  // (the helper implementing this class adds the private members it needs:
+  //  edges and rest lengths, hinges and rest angles, triangle rest frames, solver scratch)
+  ClothMaterial material_;
+  ClothIntegrator integrator_;
+  Triangles triangles_;
+  Eigen::VectorXd mass_;
+  std::vector<char> pinned_;
+  Points x_, v_;
+};
+
+}  // namespace simbake

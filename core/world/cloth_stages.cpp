@@ -1,0 +1,138 @@
+// The cloth stage of World::step, after the rigid bodies have moved (DESIGN.md stage 6).
+//
+// Each cloth computes its internal forces and new velocities itself (cloth/cloth.h). The
+// world then makes the candidate positions x + dt v respect every body and the ground: a
+// vertex whose candidate lies closer than the cloth's thickness to a surface (phi < h, with
+// phi the body's level set at its end-of-step pose) gets the normal velocity, relative to
+// the body's point velocity, that brings it exactly to distance h at the end of the step:
+//     dv_n = (h - phi) / dt - (v_rel . n)   when positive (inelastic, no bounce)
+// and Coulomb friction on the relative tangential velocity, limited by that normal change
+// (Bridson, Fedkiw and Anderson 2002): v_T <- max(0, 1 - mu dv_n / |v_T|) v_T.
+// The vertex's momentum change goes, opposite, to a dynamic body at the contact point, so
+// cloth pushes bodies back. Strain limiting follows, then a second collision pass (strain
+// limiting may pull a vertex back into a body; collisions have the last word), then
+// positions.
+#include "world/world.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace simbake {
+
+int World::add_cloth(const ClothDesc& desc, double friction, double thickness) {
+  if (!(friction >= 0.0 && std::isfinite(friction))) throw std::invalid_argument("cloth friction must be >= 0");
+  if (!(thickness >= 0.0 && std::isfinite(thickness))) throw std::invalid_argument("cloth thickness must be >= 0");
+  cloths_.emplace_back(desc);
+  cloth_friction_.push_back(friction);
+  cloth_thickness_.push_back(thickness);
+  return cloth_count() - 1;
+}
+
+void World::step_cloths(double dt) {
+  for (int c = 0; c < cloth_count(); ++c) {
+    cloths_[c].update_velocities(dt, settings_.gravity);
+    collide_cloth(c, dt);
+    cloths_[c].limit_strain(dt);
+    collide_cloth(c, dt);
+    cloths_[c].update_positions(dt);
+  }
+}
+
+void World::collide_cloth(int c, double dt) {
+  Cloth& cloth = cloths_[c];
+  const Points& x = cloth.positions();
+  Points& v = cloth.velocities();
+  const Eigen::VectorXd& mass = cloth.masses();
+  const std::vector<char>& pinned = cloth.pinned();
+  const double h = cloth_thickness_[c];
+  const int n = cloth.vertex_count();
+
+  // the cloth's box over the step, to skip bodies it cannot reach
+  Box3 reach;
+  for (int k = 0; k < n; ++k) {
+    reach.extend(Vec3(x.row(k).transpose()));
+    reach.extend(Vec3((x.row(k) + dt * v.row(k)).transpose()));
+  }
+  reach.min().array() -= h;
+  reach.max().array() += h;
+
+  // one contact: push the vertex out to distance h, friction on the relative slip, and the
+  // opposite momentum to the body (body < 0: the ground)
+  auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+    Vec3 body_velocity = Vec3::Zero();
+    if (body >= 0) {
+      const Vec3 omega = defs_[body].kinematic ? spin_[body] : angular_velocity(defs_[body], states_[body]);
+      body_velocity = states_[body].v + omega.cross(xc - states_[body].x);
+    }
+    const Vec3 vk = v.row(k).transpose();
+    const Vec3 relative = vk - body_velocity;
+    const double vn = relative.dot(normal);
+    const double dvn = (h - phi) / dt - vn;
+    if (dvn <= 0.0) return;
+    Vec3 slip = relative - vn * normal;
+    const double slip_speed = slip.norm();
+    if (slip_speed > 0.0) slip *= std::max(0.0, 1.0 - mu * dvn / slip_speed);
+    const Vec3 change = (vn + dvn) * normal + slip - relative;
+    v.row(k) += change.transpose();
+    if (body >= 0 && !defs_[body].kinematic && !asleep_[body]) {
+      const Vec3 J = mass[k] * change;  // the vertex's momentum change; the body takes -J
+      states_[body].v -= defs_[body].inverse_mass * J;
+      states_[body].l -= (xc - states_[body].x).cross(J);
+    }
+  };
+
+  for (int b = 0; b < body_count(); ++b) {
+    const RigidBodyDef& def = defs_[b];
+    if (!def.shape) continue;
+    const Pose pose = mesh_pose(def, states_[b]);
+    Box3 local = def.shape->bounds();
+    local.min().array() -= h;
+    local.max().array() += h;
+    const double radius = def.bounding_radius + h;
+    // quick reject: the body's bounding sphere misses the cloth's box
+    const Vec3 nearest = states_[b].x.cwiseMax(reach.min()).cwiseMin(reach.max());
+    if ((nearest - states_[b].x).norm() > radius) continue;
+    const double mu = std::sqrt(cloth_friction_[c] * def.friction);
+    bool touched = false;
+    for (int k = 0; k < n; ++k) {
+      if (pinned[k]) continue;
+      const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+      const Vec3 p = pose.apply_inverse(xc);
+      if (!local.contains(p)) continue;
+      Vec3 n_local;
+      const double phi = def.shape->phi_and_normal(p, n_local);
+      if (phi >= h) continue;
+      contact(k, b, xc, pose.rotation * n_local, phi, mu);
+      touched = true;
+    }
+    if (touched && asleep_[b]) wake_island(b);
+  }
+  if (ground_) {
+    const double mu = std::sqrt(cloth_friction_[c] * ground_->friction);
+    for (int k = 0; k < n; ++k) {
+      if (pinned[k]) continue;
+      const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+      const double phi = xc.y() - ground_->height;
+      if (phi < h) contact(k, -1, xc, Vec3::UnitY(), phi, mu);
+    }
+  }
+}
+
+// Deepest cloth vertex inside a body or the ground, past the surface itself (m, >= 0)
+double World::cloth_penetration() const {
+  double deepest = 0.0;
+  for (const Cloth& cloth : cloths_) {
+    const Points& x = cloth.positions();
+    for (int k = 0; k < cloth.vertex_count(); ++k) {
+      const Vec3 xk = x.row(k).transpose();
+      if (ground_) deepest = std::max(deepest, ground_->height - xk.y());
+      for (int b = 0; b < body_count(); ++b) {
+        if (!defs_[b].shape || (xk - states_[b].x).norm() > defs_[b].bounding_radius) continue;
+        deepest = std::max(deepest, -defs_[b].shape->phi(mesh_pose(defs_[b], states_[b]).apply_inverse(xk)));
+      }
+    }
+  }
+  return deepest;
+}
+
+}  // namespace simbake
