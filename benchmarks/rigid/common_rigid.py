@@ -13,8 +13,9 @@ scene-level benchmarks need on top:
 - :func:`run_frames`: steps a world frame by frame (all stepping in C++, ``step_frame``),
   with only the ``step_frame`` calls inside the clock and the poses read between frames;
 - :func:`run_child`: runs a script in a fresh Python process and reads back one JSON
-  line, for figures that must not share a process (peak memory via ``ru_maxrss``, bakes
-  pinned to one CPU).
+  line, for figures that must not share a process (peak memory, bakes pinned to one CPU).
+  Peak memory is the child's VmHWM (:func:`peak_rss_mib`, resettable), not ``ru_maxrss``:
+  Linux carries the forking parent's peak through exec into a child's ``ru_maxrss``.
 
 Every world here is built with ``threads=1`` unless a benchmark sweeps threads: the
 figures are single-thread figures (see /work/shared/PLATFORM.md).
@@ -62,7 +63,10 @@ def load(name: str):
 
 def make_world(scene, assets, **settings) -> "_core.World":
     """simulate.build_world(scene, assets), but with World(**settings) (max_substep,
-    threads, ...). Mirrors build_world's calls one for one; threads defaults to 1."""
+    threads, ...). Mirrors build_world's body calls one for one; threads defaults to 1.
+    Rigid scenes only: a scene with cloth is refused."""
+    if getattr(scene, "cloths", ()):
+        raise ValueError(f"{scene.path.name}: make_world builds rigid bodies only, this scene has cloth")
     settings.setdefault("threads", THREADS)
     world = _core.World(gravity=np.array(scene.gravity), **settings)
     if scene.ground is not None:
@@ -95,6 +99,18 @@ def check_mirror(scene, assets, frames: int = 24) -> dict:
     return {"frames": frames, "identical": diff == 0.0, "max_abs_difference": diff}
 
 
+def core_module_info() -> dict:
+    """Which build of simbake._core ran (the checkout is edited and rebuilt while we run)."""
+    import datetime
+    import hashlib
+    path = Path(_core.__file__)
+    stamp = datetime.datetime.fromtimestamp(path.stat().st_mtime, datetime.timezone.utc)
+    head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
+    return {"path": str(path), "sha1": hashlib.sha1(path.read_bytes()).hexdigest()[:12],
+            "mtime": stamp.isoformat(timespec="seconds"), "git_head": head}
+
+
 def body_index(scene) -> dict:
     return {body.name: i for i, body in enumerate(scene.bodies)}
 
@@ -106,12 +122,13 @@ def body_index(scene) -> dict:
 def run_frames(world: "_core.World", frames: int, frame_dt: float, substeps: int = 0,
                record: bool = True) -> dict:
     """Step `frames` frames; only step_frame is inside the clock (wall and process CPU).
-    Returns the stepping time, the substeps of every frame, and (when `record`) the mesh
+    Returns the stepping time, the substeps, bodies asleep and max penetration after every
+    frame, and (when `record`) the mesh
     translations at every frame boundary (frames + 1, n, 3) and the deepest penetration
     seen at any frame."""
     t0, q0 = world.mesh_poses()
     translations = [t0.copy()] if record else []
-    counts, wall, cpu, worst = [], 0.0, 0.0, 0.0
+    counts, asleep, penetration, wall, cpu = [], [], [], 0.0, 0.0
     for _ in range(frames):
         start, start_cpu = time.perf_counter(), time.process_time()
         counts.append(world.step_frame(frame_dt, substeps))
@@ -119,12 +136,14 @@ def run_frames(world: "_core.World", frames: int, frame_dt: float, substeps: int
         wall += time.perf_counter() - start
         if record:
             translations.append(world.mesh_poses()[0].copy())
-        worst = max(worst, world.statistics()["max_penetration"])
+        penetration.append(world.statistics()["max_penetration"])
+        asleep.append(world.sleeping_count)
     t1, q1 = world.mesh_poses()
-    return {"wall": wall, "cpu": cpu, "counts": counts,
+    return {"wall": wall, "cpu": cpu, "counts": counts, "asleep": asleep,
             "translations": np.array(translations) if record else None,
             "final_translations": t1, "final_orientations": q1, "initial_orientations": q0,
-            "max_penetration_any_frame": worst}
+            "penetration": penetration, "max_penetration_any_frame": max(penetration, default=0.0),
+            "deepest_penetration_time": (int(np.argmax(penetration)) + 1) * frame_dt if penetration else None}
 
 
 def note_wall_over_cpu(wall: float, cpu: float) -> None:
@@ -171,6 +190,16 @@ def drift(translations: np.ndarray, times: np.ndarray) -> dict:
             "worst_time": float(times[k])}
 
 
+def all_asleep_time(asleep: list[int], bodies: int, frame_dt: float) -> float | None:
+    """Time (s) after which every body stayed asleep to the end, or None."""
+    if not asleep or asleep[-1] < bodies:
+        return None
+    k = len(asleep)
+    while k > 0 and asleep[k - 1] >= bodies:
+        k -= 1
+    return (k + 1) * frame_dt
+
+
 def fraction_label(seconds: float) -> str:
     """1/240 for 0.0041666..."""
     return f"1/{round(1.0 / seconds):d}"
@@ -181,18 +210,40 @@ def fraction_label(seconds: float) -> str:
 
 
 def maxrss_mib() -> float:
-    """Peak resident set size of this process so far (MiB; Linux reports KiB)."""
+    """ru_maxrss of this process (MiB; Linux reports KiB). Careful in a child process: Linux
+    carries the forking parent's peak through exec into it (exec_mmap keeps the old mm's
+    high-water mark in signal->maxrss), so a child of a big parent never reads below the
+    parent's size. peak_rss_mib() reads the child's own high-water mark instead."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def current_rss_mib() -> float:
+def _status_mib(key: str) -> float:
     try:
         for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
+            if line.startswith(key + ":"):
                 return float(line.split()[1]) / 1024.0
     except OSError:
         pass
     return float("nan")
+
+
+def current_rss_mib() -> float:
+    return _status_mib("VmRSS")
+
+
+def peak_rss_mib() -> float:
+    """This process's own peak resident set size (VmHWM, MiB) since it started or since
+    reset_peak_rss()."""
+    return _status_mib("VmHWM")
+
+
+def reset_peak_rss() -> bool:
+    """Reset VmHWM to the current RSS (Linux >= 4.0: write 5 to /proc/self/clear_refs)."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
 
 
 def run_child(script: Path, args: list[str], timeout: float = 900.0) -> dict:
