@@ -14,9 +14,14 @@
 
 #include "math/types.h"
 
+#include <memory>
 #include <vector>
 
 namespace simbake {
+
+namespace cloth_detail {
+class ForceModel;  // cloth/cloth_forces.h: topology, rest state and element forces
+}
 
 enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
@@ -82,6 +87,22 @@ class Cloth {
   Eigen::VectorXd mass_;
   std::vector<char> pinned_;
   Points x_, v_;
+
+  // edges, hinges, membrane rest frames and the element forces; constant after
+  // construction, so copies of a Cloth share it
+  std::shared_ptr<const cloth_detail::ForceModel> model_;
+  std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
+  int free_count_ = 0;
+  double stable_step_ = 0.0;     // stable_explicit_step(), computed once
+  double bend_omega2_ = 0.0;     // bound of the squared fastest bending frequency at rest (1/s^2)
+  std::vector<int> forward_order_, backward_order_;  // the strain limiter's sweep orders
+
+  void explicit_velocities(double dt, const Vec3& gravity);
+  void implicit_velocities(double dt, const Vec3& gravity);
+  double compute_stable_step() const;
+  double largest_omega2(bool stretch, bool bend) const;
+  double strain_sweep(double dt, const std::vector<int>& order);
+  void project_strain(double dt);
 };
 
 }  // namespace simbake

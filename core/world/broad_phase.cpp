@@ -182,7 +182,14 @@ void World::update_sleeping(double dt) {
     }
     if (rest_time_[i] < settings_.sleep_time) ready[find_island(i)] = 0;
   }
-  // touching a moving kinematic body keeps an island awake
+  // still pushing out of a deep overlap (deeper than ten times the slop) keeps an island awake,
+  // as does touching a moving kinematic body
+  for (const ContactPoint& c : contacts_) {
+    if (-c.point.phi <= 10.0 * settings_.penetration_slop) continue;
+    for (int i : {c.point.a, c.point.b}) {
+      if (i != kGround && !defs_[i].kinematic) ready[find_island(i)] = 0;
+    }
+  }
   for (const ContactPoint& c : contacts_) {
     if (moving_kinematic(c.point.a) && c.point.b != kGround) ready[find_island(c.point.b)] = 0;
     if (c.point.b != kGround && moving_kinematic(c.point.b)) ready[find_island(c.point.a)] = 0;

@@ -5,7 +5,8 @@
 // vertex whose candidate lies closer than the cloth's thickness to a surface (phi < h, with
 // phi the body's level set at its end-of-step pose) gets the normal velocity, relative to
 // the body's point velocity, that brings it exactly to distance h at the end of the step:
-//     dv_n = (h - phi) / dt - (v_rel . n)   when positive (inelastic, no bounce)
+//     dv_n = (h - phi) / dt   when positive (phi is taken at the candidate, so this is the
+//                              change that moves the candidate out to h: inelastic, no bounce)
 // and Coulomb friction on the relative tangential velocity, limited by that normal change
 // (Bridson, Fedkiw and Anderson 2002): v_T <- max(0, 1 - mu dv_n / |v_T|) v_T.
 // The vertex's momentum change goes, opposite, to a dynamic body at the contact point, so
@@ -67,7 +68,7 @@ void World::collide_cloth(int c, double dt) {
     const Vec3 vk = v.row(k).transpose();
     const Vec3 relative = vk - body_velocity;
     const double vn = relative.dot(normal);
-    const double dvn = (h - phi) / dt - vn;
+    const double dvn = (h - phi) / dt;
     if (dvn <= 0.0) return;
     Vec3 slip = relative - vn * normal;
     const double slip_speed = slip.norm();

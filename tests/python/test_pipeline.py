@@ -459,25 +459,50 @@ def test_pose_is_the_mesh_origin_not_the_centre_of_mass(write_scene, meshes, tmp
 # what is not implemented yet is refused, cleanly
 # --------------------------------------------------------------------------------------------
 
-def test_cloth_is_rejected_without_writing(write_scene, tmp_path):
+def test_cloth_cache_has_sampled_points_normals_extent_velocities(write_scene, tmp_path):
     scene_path = write_scene("""
         [scene]
-        end_frame = 10
-        [[bodies]]
-        name = "ball"
-        shape = { type = "sphere", radius = 0.1 }
+        fps = 24
+        end_frame = 13
+        [ground]
         [[cloths]]
         name = "sheet"
-        grid = { size = [1.0, 1.0], resolution = [4, 4] }
+        grid = { size = [1.0, 0.5], resolution = [11, 6] }
         position = [0.0, 1.0, 0.0]
+        pinned = [0, 10]
     """)
-    scene = simbake.load_scene(scene_path)  # a valid scene file...
-    out = tmp_path / "cloth.usdc"
-    before = sorted(p.name for p in tmp_path.iterdir())
+    stats = simbake.bake(simbake.load_scene(scene_path), tmp_path / "cloth.usdc")
+    stage = open_stage(tmp_path / "cloth.usdc")
+    mesh = stage.GetPrimAtPath("/World/sheet")
+    assert mesh.GetTypeName() == "Mesh"
+    for attr in ("points", "normals", "extent", "velocities"):
+        assert mesh.GetAttribute(attr).GetTimeSamples() == [float(f) for f in range(1, 14)], attr
+    for attr in ("faceVertexCounts", "faceVertexIndices"):
+        assert mesh.GetAttribute(attr).GetNumTimeSamples() == 0, attr  # topology written once
+    assert len(mesh.GetAttribute("faceVertexIndices").Get()) == 3 * 2 * 10 * 5
+    points = [np.array(mesh.GetAttribute("points").Get(f)) for f in (1, 13)]
+    # vertex (i, j) is j * nx + i, the grid centred on position: vertex 0 at (-x, -z), 10 at (+x, -z)
+    assert np.allclose(points[0][0], [-0.5, 1.0, -0.25]) and np.allclose(points[0][10], [0.5, 1.0, -0.25])
+    # the pinned corners stay; the free edge falls (half a second under gravity)
+    assert np.allclose(points[1][[0, 10]], points[0][[0, 10]])
+    assert points[1][60][1] < 0.9
+    # velocities are metres per second: they agree with the motion between frames
+    v = np.array(mesh.GetAttribute("velocities").Get(12))
+    finite_difference = (np.array(mesh.GetAttribute("points").Get(13)) - np.array(mesh.GetAttribute("points").Get(12))) * 24
+    assert np.abs(v - finite_difference).max() < 0.2 * np.abs(finite_difference).max() + 1e-3
+    assert stats.frames == 13
+
+
+def test_cloth_pinned_index_out_of_range_for_a_mesh_is_an_error(write_scene, meshes, tmp_path):
+    scene_path = write_scene("""
+        [scene]
+        end_frame = 3
+        [[cloths]]
+        name = "cape"
+        mesh = "torus.obj"
+        pinned = [0, 99999]
+    """)
     with pytest.raises(simbake.SceneError) as info:
-        simbake.bake(scene, out)  # ...that this version cannot bake
-    assert info.value.key == "cloths"
-    assert "cloths" in str(info.value) and str(scene_path.name) in str(info.value)
-    assert "\n" not in str(info.value)
-    assert not out.exists()
-    assert sorted(p.name for p in tmp_path.iterdir()) == before
+        simbake.bake(simbake.load_scene(scene_path), tmp_path / "cape.usdc")
+    assert info.value.key == "cloths[0].pinned" and "99999" in str(info.value)
+    assert not (tmp_path / "cape.usdc").exists()

@@ -1,0 +1,571 @@
+// Cloth: in-plane elasticity (springs or a StVK membrane), bending, damping, implicit or
+// explicit integration, strain limiting. The element code is in cloth_forces.cpp.
+//
+// In-plane elasticity, two models behind one interface (material.model):
+//  * springs (the notes, "Curve / Springs"): every mesh edge is a spring, so a grid's
+//    sides resist stretch and its triangle diagonals resist shear. Per edge of rest length
+//    L, A = (x_j - x_i) / L is the deformation gradient of the segment and
+//        W = 1/2 E (|A| - 1)^2 L,     f_j = -E (|x_j - x_i| / L - 1) d = -f_i,
+//    d the unit edge direction: a spring of constant k = E / L. E is in newtons (force per
+//    unit strain).
+//  * membrane (the notes, "Elastic Surfaces" to "Surface elasticity"): each triangle is a
+//    linear element; its rest shape is laid out in its own 2D frame (Dm, 2x2) so that the
+//    deformation gradient F = Ds Dm^-1 is 3x2 (Ds = [x1 - x0, x2 - x0]), the Green strain
+//    G = 1/2 (F^T F - I) is 2x2, and St. Venant-Kirchhoff gives
+//        W = A0 (mu G:G + lambda/2 tr(G)^2),   S = 2 mu G + lambda tr(G) I,   P = F S,
+//        forces on (x1, x2) = -A0 P Dm^-T (columns), on x0 minus their sum,
+//    with plane-stress Lame parameters from Y = stretch_stiffness (Young's modulus x
+//    thickness, N/m) and nu = poisson_ratio: mu = Y / (2 (1 + nu)), lambda = Y nu / (1 - nu^2),
+//    so that a sheet pulled one way with free sides carries S11 = Y G11 and narrows by
+//    G22 = -nu G11.
+// Compression (notes, "Compression and buckling", Choi and Ko 2002's subgrid idea): real cloth
+// buckles instead of compressing, which a coarse mesh cannot resolve. With kSubgrid (and
+// kEnforce) a spring under compression (|A| < 1) has stiffness E x subgrid_scale; the
+// membrane does the same per principal Green strain (W = mu sum s(g_i) g_i^2 + lambda/2
+// s(tr G) tr(G)^2, s = subgrid_scale for a negative argument, else 1), so a sheet compressed
+// one way and stretched the other only resists the stretch. kNone is symmetric.
+// kEnforce adds an impulse pass (below) that keeps edges from shortening at all.
+//
+// Bending (notes, "Bending energy"; Grinspun, Hirani, Desbrun and Schroeder 2003, "Discrete
+// shells"): for each interior edge (hinge) e with current dihedral angle theta, rest angle
+// theta0 (of the rest mesh, so a curved rest mesh keeps its shape), rest length |e| and the
+// rest areas A1, A2 of its two triangles,
+//        W_e = c B (theta - theta0)^2 |e|^2 / (A1 + A2),     c = 1/2 (not the 3/2 of the paper).
+// The constant is set so that the energy of a cylinder matches the continuum 1/2 B (1/R1 +
+// 1/R2)^2 = B / (2 R^2) per unit area (cloth bends isometrically, so this is the case that
+// matters). Derivation: for a regular mesh bent onto a cylinder of radius R, the hinges
+// along the axis between strips of width h turn by theta = h / R and the others stay flat
+// (exactly so on a grid with the axis along a grid direction; on an equilateral mesh the
+// sum over the three edge directions gives the same, for any axis direction). Per unit
+// area there is one axial hinge per h x a, with |e|^2 / (A1 + A2) = a^2 / (a h), so the
+// energy per area is c B (h/R)^2 (a / h) / (h a) = c B / R^2: c = 1/2. More generally, on
+// an equilateral mesh the edge sum has the density c (H2 - 8/3 K), H2 = (1/R1 + 1/R2)^2
+// and K the Gaussian curvature, whatever the orientation; the paper's 3/2 makes the H2 term
+// 3x too stiff (it is calibrated on a sphere, where the K term takes the excess back). With
+// 1/2 the H2 term is exact and the K term, whose integral is topological (Gauss-Bonnet),
+// exerts no force inside the sheet; cloth bends nearly isometrically (K ~ 0) anyway.
+// Checked by the test ClothBending.CylinderEnergyConvergesToContinuum (grid and
+// equilateral meshes; the error is the boundary's, ~1/n). Note: on a grid whose diagonals
+// all run one way, bending across a diagonal is up to 3x stiffer than along the grid (an
+// anisotropy of the mesh, not of the constant).
+// The dihedral angle's gradient is the closed form of Bridson, Marino and Fedkiw 2003
+// ("Simulation of clothing with folds and wrinkles"): opposite vertex x2 gets -n_A / h_A,
+// x3 gets -n_B / h_B, the edge's vertices the rest weighted by where x2, x3 project onto the
+// edge. The force is -B (theta - theta0) |e|^2 / (A1 + A2) grad theta.
+//
+// Damping (notes, soft constraints with Rayleigh damping): f_d = -damping x H_m v, where
+// H_m is the elastic Hessian's material (Gauss-Newton) part: for springs E/L d d^T, so only
+// the relative velocity along the edge is damped; for the membrane (dG/dx)^T C (dG/dx) A0,
+// i.e. the strain rate; for bending grad theta grad theta^T. Each is zero for any rigid
+// motion (rigid velocities change no edge length, Green strain or dihedral angle at first
+// order), so a freely spinning and translating cloth keeps its momentum and energy. (The
+// full Hessian would not: its geometric part times a rotation is not zero under tension.)
+// H_m is evaluated at the midpoint x + dt/2 v of the step, where the velocity the step
+// uses is rigid to O(a^3) for a rotation by a per step (at x it would be O(a): enough,
+// times a large stiffness, to brake a spinning cloth visibly).
+//
+// Implicit step (Baraff and Witkin 1998, "Large steps in cloth simulation"): one linearized
+// backward-Euler step,
+//        (M - dt^2 K - dt D) dv = dt (f + D v + M g),     x_new = x + dt (v + dv),
+// with K = df/dx = -H the stiffness and D = df/dv = -damping x H_m. Baraff and Witkin
+// linearize the elastic force about x: f(x) + dt K(x) (v + dv). Here it is linearized about
+// the inertial prediction y = x + dt v instead, f(y) + dt K(y) dv: the same to first order
+// (and identical for linear forces), and exactly the first Newton iteration of backward
+// Euler's incremental potential started at y. The difference matters for rotation: with
+// the linearization at x, a cloth spinning at omega loses angular momentum at a rate that
+// grows with (omega_spring dt)^2, because x + dt v stretches every edge by (omega dt)^2 / 2,
+// which the next step's stiff forces see in full (an 8 x 8 cloth of E = 20 kN spinning at
+// 2 rad/s kept 1.4% of its kinetic energy after 1 s); about y it keeps 96.8%, backward
+// Euler's own exp(-2 omega^2 dt t) whatever the stiffness. H is made positive
+// semi-definite element by element (springs: the transverse term dropped under compression;
+// membrane: the 9x9 Hessian projected by eigen-decomposition; bending: its Gauss-Newton part
+// only), so M + dt^2 H + damping dt H_m is symmetric positive definite. It is assembled
+// from triplets into an Eigen sparse matrix over the unpinned vertices only (pinned rows and
+// columns removed: their velocity is zero and stays so), scaled by M^-1/2 on both sides, and
+// solved with Jacobi-preconditioned conjugate gradients to a relative residual of 1e-6.
+// For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
+// (the exact solution changes the total momentum by dt M g only). Bending stays out of the
+// matrix (force only) while the step resolves it, (dt^2 + damping dt) omega_bend^2 < 0.1:
+// its 12 x 12 blocks would double the cost of each solve. Gravity is an external force m g
+// on unpinned vertices.
+// Explicit step: symplectic Euler, v += dt M^-1 f (positions then move with the new v).
+//
+// Stable explicit step (speed of sound): a chain of springs k = E / L and vertex masses
+// m = rho_line L has its fastest mode at omega^2 = 4 k / m = 4 E / (rho_line L^2), and
+// symplectic Euler needs dt omega <= 2, i.e. dt <= L / sqrt(E / rho_line): the time for a
+// sound wave to cross one edge. For any mesh, material and bending together, omega_max^2 is
+// the largest eigenvalue of M^-1/2 H M^-1/2 at rest, bounded above by its largest
+// Gershgorin row sum (exact for the chain, ~1.2x for a grid). With stiffness-proportional
+// damping the mode obeys x'' = -omega^2 (x + damping x'), and symplectic Euler with explicit
+// damping is stable (Jury's test on z^2 - (2 - a - b) z + 1 - b, a = dt^2 omega^2,
+// b = damping dt omega^2) when a + 2 b <= 4, i.e. dt <= sqrt(damping^2 + 4 / omega^2) -
+// damping (about 2 / (damping omega^2) once damping omega >> 1: strong damping makes explicit
+// steps tiny). The bound includes the stiffening that stretch up to the strain limit brings
+// (springs: the transverse term, 1 + e / (1 + e); membrane: the StVK tangent, (3 (1 + e)^2
+// - 1) / 2; e = 10% when unlimited) and a safety factor of 0.75 (a stretched membrane near
+// the bound can still go unstable over seconds through nonlinear coupling; at 0.8 of the
+// bound it did not).
+//
+// Strain limiting (notes, "Strain limiting"; Provot 1995, Bridson et al. 2002): Gauss-Seidel
+// sweeps over the edges; where the candidate positions x + dt v put an edge beyond (1 +
+// limit) L, equal and opposite velocity impulses along it (shared by inverse mass, pinned
+// vertices having none) bring its candidate length to exactly (1 + limit) L. kEnforce
+// ("Enforced buckling") does the same for an edge whose candidate strain is below -0.001,
+// bringing it back to L. A few sweeps usually suffice; where they do not (a load hanging
+// on a long chain of limited edges, which Gauss-Seidel converges on only in hundreds of
+// sweeps), the remaining violations are solved together, the same impulses computed by a
+// sparse solve per Newton iteration (Goldenthal et al. 2007, "Efficient simulation of
+// inextensible cloth", with an active set for the inequality). Both stop when every edge is
+// within 1e-6 L of its bound. Impulses are internal, so momentum is kept.
+#include "cloth/cloth.h"
+
+#include "cloth/cloth_forces.h"
+#include "geometry/mesh.h"
+
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/SparseCholesky>
+#include <Eigen/Sparse>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace simbake {
+
+namespace {
+
+constexpr int kStrainSweeps = 8;            // Gauss-Seidel sweeps of the strain limiter before the global pass
+constexpr int kProjectionIterations = 10;   // most Newton iterations of the global pass
+constexpr int kActiveSetPasses = 8;         // most active-set updates per Newton iteration
+constexpr double kStrainTolerance = 1e-6;   // strain limiting is done when every edge is this close (x L)
+constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
+constexpr double kSolverTolerance = 1e-6;   // CG relative residual
+constexpr double kStableSafety = 0.75;      // of the explicit stability bound
+constexpr double kExplicitBending = 0.1;    // implicit step: bending enters the matrix above this dt^2 omega^2
+
+void require(bool ok, const std::string& message) {
+  if (!ok) throw std::invalid_argument("cloth: " + message);
+}
+
+Vec3 row(const Points& x, int k) { return x.row(k).transpose(); }
+
+// The length an edge of rest length `rest` must have when its candidate length is `length`:
+// (1 + limit) rest when stretched beyond that, rest under kEnforce when compressed beyond
+// the threshold, or -1 when it is within its bounds
+double strain_target(double length, double rest, double limit, bool enforce) {
+  if (limit > 0.0 && length > (1.0 + limit) * rest) return (1.0 + limit) * rest;
+  if (enforce && length < (1.0 + kEnforceThreshold) * rest) return rest;
+  return -1.0;
+}
+
+// Damping force -damping H_m(x_mid) v and, if asked, its matrix weight x H_m, evaluated at
+// the midpoint x + dt/2 v of the coming step. For a rigid rotation by an angle a per step,
+// the edge-length rate that damping sees is then O(a^3) of the rotation's own velocities;
+// at x or at x + dt v it would be O(a), which times a large stiffness visibly slows spins.
+void add_damping(const cloth_detail::ForceModel& model, double damping, const Points& x, const Points& v,
+                 double dt, const std::vector<int>& matrix_index, double matrix_weight, bool bend_matrix,
+                 Eigen::VectorXd& force, std::vector<cloth_detail::Triplet>* triplets) {
+  if (damping == 0.0) return;
+  const Points midpoint = x + (0.5 * dt) * v;
+  cloth_detail::Assembly what;
+  what.bend_matrix = bend_matrix;
+  what.elastic = false;
+  what.velocity = &v;
+  what.damping = damping;
+  what.material_weight = matrix_weight;
+  what.matrix_index = &matrix_index;
+  what.force = &force;
+  what.triplets = triplets;
+  model.assemble(midpoint, what);
+}
+
+}  // namespace
+
+Cloth::Cloth(const ClothDesc& desc)
+    : material_(desc.material), integrator_(desc.integrator), triangles_(desc.triangles), x_(desc.rest) {
+  // validate the description
+  const int n = static_cast<int>(desc.rest.rows());
+  require(n >= 3, "needs at least 3 vertices");
+  require(desc.rest.allFinite(), "rest positions must be finite");
+  require(desc.triangles.rows() >= 1, "needs at least one triangle");
+  require(desc.area_density > 0.0 && std::isfinite(desc.area_density), "area_density must be > 0");
+  const ClothMaterial& m = desc.material;
+  require(m.stretch_stiffness >= 0.0 && std::isfinite(m.stretch_stiffness), "stretch_stiffness must be >= 0");
+  require(m.poisson_ratio >= 0.0 && m.poisson_ratio <= 0.5, "poisson_ratio must be in [0, 0.5]");
+  require(m.bend_stiffness >= 0.0 && std::isfinite(m.bend_stiffness), "bend_stiffness must be >= 0");
+  require(m.damping >= 0.0 && std::isfinite(m.damping), "damping must be >= 0");
+  require(m.strain_limit >= 0.0 && std::isfinite(m.strain_limit), "strain_limit must be >= 0");
+  require(m.subgrid_scale >= 0.0 && m.subgrid_scale <= 1.0, "subgrid_scale must be in [0, 1]");
+
+  // lumped masses: a third of each triangle's rest area times the area density
+  mass_ = Eigen::VectorXd::Zero(n);
+  for (int t = 0; t < desc.triangles.rows(); ++t) {
+    const int a = desc.triangles(t, 0), b = desc.triangles(t, 1), c = desc.triangles(t, 2);
+    for (int v : {a, b, c}) {
+      require(v >= 0 && v < n, "triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) +
+                                   " that does not exist (the cloth has " + std::to_string(n) + ")");
+    }
+    require(a != b && b != c && a != c, "triangle " + std::to_string(t) + " repeats a vertex");
+    const double area = 0.5 * (row(x_, b) - row(x_, a)).cross(row(x_, c) - row(x_, a)).norm();
+    require(area > 0.0, "triangle " + std::to_string(t) + " has zero area");
+    for (int v : {a, b, c}) mass_[v] += desc.area_density * area / 3.0;
+  }
+  for (int v = 0; v < n; ++v) require(mass_[v] > 0.0, "vertex " + std::to_string(v) + " belongs to no triangle");
+
+  // pinned vertices and the implicit system's numbering of the free ones
+  pinned_.assign(n, 0);
+  for (int p : desc.pinned) {
+    require(p >= 0 && p < n, "pinned vertex " + std::to_string(p) + " does not exist (the cloth has " +
+                                 std::to_string(n) + ")");
+    pinned_[p] = 1;
+  }
+  free_index_.assign(n, -1);
+  for (int v = 0; v < n; ++v) {
+    if (!pinned_[v]) free_index_[v] = free_count_++;
+  }
+
+  // state: at rest, still
+  v_ = Points::Zero(n, 3);
+  model_ = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
+
+  // the strain limiter's edge orders: as stored (sorted by vertex indices), and reversed
+  forward_order_.resize(model_->edges().size());
+  for (size_t q = 0; q < forward_order_.size(); ++q) forward_order_[q] = static_cast<int>(q);
+  backward_order_.assign(forward_order_.rbegin(), forward_order_.rend());
+  bend_omega2_ = largest_omega2(false, true);
+  stable_step_ = compute_stable_step();
+}
+
+// ---- stage: forces and the velocity update
+
+void Cloth::update_velocities(double dt, const Vec3& gravity) {
+  require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
+  if (integrator_ == ClothIntegrator::kImplicit) {
+    implicit_velocities(dt, gravity);
+  } else {
+    explicit_velocities(dt, gravity);
+  }
+  // pinned vertices never move
+  for (int k = 0; k < vertex_count(); ++k) {
+    if (pinned_[k]) v_.row(k).setZero();
+  }
+}
+
+// symplectic Euler: v += dt M^-1 (f_elastic + f_damping) + dt g
+void Cloth::explicit_velocities(double dt, const Vec3& gravity) {
+  Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * vertex_count());
+  cloth_detail::Assembly what;
+  what.force = &force;
+  model_->assemble(x_, what);
+  add_damping(*model_, material_.damping, x_, v_, dt, free_index_, 0.0, false, force, nullptr);
+  for (int k = 0; k < vertex_count(); ++k) {
+    if (pinned_[k]) continue;
+    v_.row(k) += dt * (force.segment<3>(3 * k) / mass_[k] + gravity).transpose();
+  }
+}
+
+// linearized backward Euler (Baraff-Witkin), the elastic part linearized about the inertial
+// prediction y = x + dt v, damping at the step's midpoint:
+// (M + dt^2 H(y) + damping dt H_m(x_mid)) dv = dt (f(y) - damping H_m(x_mid) v + M g)
+void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
+  if (free_count_ == 0) return;
+  const int n = vertex_count();
+  // elastic forces at the prediction and the matrix's stiffness triplets, then damping
+  Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * n);
+  std::vector<cloth_detail::Triplet> triplets;
+  const bool bend_matrix = (dt * dt + material_.damping * dt) * bend_omega2_ > kExplicitBending;
+  const size_t per_pass = 36 * model_->edges().size() + 81 * model_->membranes().size() +
+                          (bend_matrix ? 144 * model_->hinges().size() : 0);
+  triplets.reserve((material_.damping > 0.0 ? 2 : 1) * per_pass + 3 * free_count_);
+  const Points predicted = x_ + dt * v_;
+  // bending stays out of the matrix (forces only, at the prediction) while the step
+  // resolves it: dt^2 omega^2 (+ damping dt omega^2) small for its fastest mode. Its
+  // 12 x 12 blocks would otherwise double the matrix's size and the solve's cost.
+  cloth_detail::Assembly what;
+  what.bend_matrix = bend_matrix;
+  what.hessian_weight = dt * dt;
+  what.matrix_index = &free_index_;
+  what.force = &force;
+  what.triplets = &triplets;
+  model_->assemble(predicted, what);
+  add_damping(*model_, material_.damping, x_, v_, dt, free_index_, material_.damping * dt, bend_matrix, force,
+              &triplets);
+  // the mass diagonal and the right-hand side, over free vertices only; the system is
+  // scaled by M^-1/2 on both sides (unknown z = M^1/2 dv), so that the residual is measured
+  // in the norm that bounds the velocity error in kinetic-energy terms, |e|_M <= |r|_(M^-1)
+  Eigen::VectorXd rhs(3 * free_count_), scale(3 * free_count_);
+  for (int k = 0; k < n; ++k) {
+    const int i = free_index_[k];
+    if (i < 0) continue;
+    for (int r = 0; r < 3; ++r) {
+      triplets.emplace_back(3 * i + r, 3 * i + r, mass_[k]);
+      scale[3 * i + r] = 1.0 / std::sqrt(mass_[k]);
+      rhs[3 * i + r] = dt * (force[3 * k + r] + mass_[k] * gravity[r]) * scale[3 * i + r];
+    }
+  }
+  Eigen::SparseMatrix<double> system(3 * free_count_, 3 * free_count_);
+  system.setFromTriplets(triplets.begin(), triplets.end());
+  system = scale.asDiagonal() * system * scale.asDiagonal();
+  // Jacobi-preconditioned conjugate gradients (the matrix is symmetric positive definite)
+  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper> solver;
+  solver.setTolerance(kSolverTolerance);
+  solver.compute(system);
+  Eigen::VectorXd dv = scale.asDiagonal() * solver.solve(rhs);
+  // With no vertex pinned the exact dv changes the total momentum by exactly dt M g (the
+  // internal forces sum to zero); the solver's residual need not, so its net part is removed
+  if (free_count_ == n) {
+    Vec3 excess = -dt * mass_.sum() * gravity;
+    for (int k = 0; k < n; ++k) excess += mass_[k] * dv.segment<3>(3 * k);
+    for (int k = 0; k < n; ++k) dv.segment<3>(3 * k) -= excess / mass_.sum();
+  }
+  for (int k = 0; k < n; ++k) {
+    const int i = free_index_[k];
+    if (i >= 0) v_.row(k) += dv.segment<3>(3 * i).transpose();
+  }
+}
+
+// ---- stage: strain limiting (and enforced buckling) by impulses along edges
+
+// One Gauss-Seidel sweep over the edges in the given order: each edge off its target gets
+// the impulse along it that puts its candidate length x + dt v exactly at the target,
+// equal and opposite, shared by the inverse masses. Returns the largest correction made
+// (relative to the rest length).
+double Cloth::strain_sweep(double dt, const std::vector<int>& order) {
+  const std::vector<cloth_detail::Edge>& edges = model_->edges();
+  const double limit = material_.strain_limit;
+  const bool enforce = material_.compression == CompressionMode::kEnforce;
+  double worst = 0.0;
+  for (int q : order) {
+    const cloth_detail::Edge& e = edges[q];
+    const double wi = pinned_[e.i] ? 0.0 : 1.0 / mass_[e.i];
+    const double wj = pinned_[e.j] ? 0.0 : 1.0 / mass_[e.j];
+    if (wi + wj == 0.0) continue;
+    const Vec3 d = row(x_, e.j) + dt * row(v_, e.j) - row(x_, e.i) - dt * row(v_, e.i);
+    const double length = d.norm();
+    const double target = strain_target(length, e.rest, limit, enforce);
+    if (target < 0.0 || length <= 0.0) continue;
+    worst = std::max(worst, std::abs(length - target) / e.rest);
+    const Vec3 change = ((length - target) / (dt * (wi + wj) * length)) * d;
+    v_.row(e.i) += (wi * change).transpose();
+    v_.row(e.j) -= (wj * change).transpose();
+  }
+  return worst;
+}
+
+void Cloth::limit_strain(double dt) {
+  require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
+  if (material_.strain_limit <= 0.0 && material_.compression != CompressionMode::kEnforce) return;
+  // Gauss-Seidel sweeps with the true masses, forward and backward in turn (momentum is
+  // kept: every impulse is internal); usually a few are enough
+  for (int sweep = 0; sweep < kStrainSweeps; ++sweep) {
+    if (strain_sweep(dt, sweep % 2 == 0 ? forward_order_ : backward_order_) < kStrainTolerance) return;
+  }
+  // They converge slowly where a long chain of edges holds a load (a soft cloth hanging
+  // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
+  // 12 x 12 cloth can need hundreds of sweeps). The rest is solved for all edges at once.
+  project_strain(dt);
+}
+
+// Strain limiting for all edges at once: Newton iterations on the candidate lengths (the
+// "fast projection" of Goldenthal et al. 2007, with inequality bounds). With J the length
+// Jacobian of the active edges at the candidate positions p = x + dt v and W = M^-1 (0 for
+// pinned vertices), the edge impulses mu solve (J W J^T + eps) mu = -(lengths - targets)
+// and change v by W J^T mu / dt: along each edge, equal and opposite, mass-weighted, as in a
+// sweep. An edge is active while it violates its bound, and stays active (held at the
+// bound) until its impulse would have to push the wrong way (apart for a stretched edge).
+void Cloth::project_strain(double dt) {
+  const std::vector<cloth_detail::Edge>& edges = model_->edges();
+  const double limit = material_.strain_limit;
+  const bool enforce = material_.compression == CompressionMode::kEnforce;
+  const int count = static_cast<int>(edges.size()), n = vertex_count();
+  auto inverse_mass = [&](int k) { return pinned_[k] ? 0.0 : 1.0 / mass_[k]; };
+  std::vector<double> target(count, -1.0);  // >= 0: the edge is active, held at this length
+  for (int iteration = 0; iteration < kProjectionIterations; ++iteration) {
+    const Points p = x_ + dt * v_;
+    // lengths now; new violations become active; the largest error decides whether to go on
+    std::vector<double> length(count);
+    double worst = 0.0;
+    for (int q = 0; q < count; ++q) {
+      const cloth_detail::Edge& e = edges[q];
+      if (inverse_mass(e.i) + inverse_mass(e.j) == 0.0) continue;
+      length[q] = (row(p, e.j) - row(p, e.i)).norm();
+      const double bound = strain_target(length[q], e.rest, limit, enforce);
+      if (bound >= 0.0) {
+        target[q] = bound;
+        worst = std::max(worst, std::abs(length[q] - bound) / e.rest);
+      }
+    }
+    if (worst < kStrainTolerance) return;
+    // solve on the active set; drop edges whose impulse has the wrong sign and re-solve
+    Eigen::VectorXd mu;
+    std::vector<int> active;
+    std::vector<Vec3> direction;
+    Points move;
+    for (int attempt = 0; attempt < kActiveSetPasses; ++attempt) {
+      active.clear();
+      for (int q = 0; q < count; ++q) {
+        if (target[q] >= 0.0) active.push_back(q);
+      }
+      const int m = static_cast<int>(active.size());
+      direction.assign(m, Vec3::Zero());
+      std::vector<std::vector<std::pair<int, double>>> at_vertex(n);  // (active row, -1 first / +1 second end)
+      Eigen::VectorXd error(m);
+      for (int a = 0; a < m; ++a) {
+        const cloth_detail::Edge& e = edges[active[a]];
+        const Vec3 d = row(p, e.j) - row(p, e.i);
+        if (length[active[a]] > 0.0) direction[a] = d / length[active[a]];
+        error[a] = length[active[a]] - target[active[a]];
+        at_vertex[e.i].push_back({a, -1.0});
+        at_vertex[e.j].push_back({a, 1.0});
+      }
+      // J W J^T: edges meeting at a free vertex k couple through w_k (s_a d_a) . (s_b d_b)
+      std::vector<cloth_detail::Triplet> triplets;
+      double largest = 0.0;
+      for (int k = 0; k < n; ++k) {
+        const double w = inverse_mass(k);
+        if (w == 0.0) continue;
+        for (const auto& [a, sa] : at_vertex[k]) {
+          for (const auto& [b, sb] : at_vertex[k]) {
+            triplets.emplace_back(a, b, w * sa * sb * direction[a].dot(direction[b]));
+          }
+          largest = std::max(largest, w);
+        }
+      }
+      // a whisker of compliance keeps it definite where active edges are redundant (a flat
+      // triangle mesh has more edges than in-plane degrees of freedom)
+      for (int a = 0; a < m; ++a) triplets.emplace_back(a, a, 1e-9 * largest);
+      Eigen::SparseMatrix<double> system(m, m);
+      system.setFromTriplets(triplets.begin(), triplets.end());
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(system);
+      mu = solver.solve(Eigen::VectorXd(-error));
+      // a stretched edge may only be pulled together (mu <= 0), a compressed one pushed apart
+      bool changed = false;
+      for (int a = 0; a < m; ++a) {
+        const cloth_detail::Edge& e = edges[active[a]];
+        const bool stretched = target[active[a]] > e.rest;
+        const bool violated = stretched ? error[a] > 0.0 : error[a] < 0.0;
+        if (!violated && (stretched ? mu[a] > 0.0 : mu[a] < 0.0)) {
+          target[active[a]] = -1.0;
+          changed = true;
+        }
+      }
+      // the position change these impulses make, and the edges it would push past a bound
+      // (to first order): they join, and the set is solved again
+      move.setZero(n, 3);
+      for (int a = 0; a < m; ++a) {
+        const cloth_detail::Edge& e = edges[active[a]];
+        move.row(e.i) -= (inverse_mass(e.i) * mu[a] * direction[a]).transpose();
+        move.row(e.j) += (inverse_mass(e.j) * mu[a] * direction[a]).transpose();
+      }
+      const bool dropped = changed;
+      for (int q = 0; q < count && !dropped; ++q) {
+        if (target[q] >= 0.0 || length[q] <= 0.0) continue;
+        const cloth_detail::Edge& e = edges[q];
+        const Vec3 d = (row(p, e.j) - row(p, e.i)) / length[q];
+        const double predicted = length[q] + d.dot(row(move, e.j) - row(move, e.i));
+        const double bound = strain_target(predicted, e.rest, limit, enforce);
+        if (bound >= 0.0) {
+          target[q] = bound;
+          changed = true;
+        }
+      }
+      if (!changed) break;
+    }
+    // the impulses
+    for (int k = 0; k < n; ++k) v_.row(k) += move.row(k) / dt;
+  }
+}
+
+// ---- stage: positions
+
+void Cloth::update_positions(double dt) {
+  require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
+  for (int k = 0; k < vertex_count(); ++k) {
+    if (pinned_[k]) {
+      v_.row(k).setZero();
+    } else {
+      x_.row(k) += dt * v_.row(k);
+    }
+  }
+}
+
+// ---- the explicit stability limit (derivation at the top of this file)
+
+double Cloth::stable_explicit_step() const { return stable_step_; }
+
+double Cloth::compute_stable_step() const {
+  if (free_count_ == 0) return std::numeric_limits<double>::infinity();
+  // stiffening under stretch up to the strain limit (nominal 10% when unlimited)
+  const double e = material_.strain_limit > 0.0 ? material_.strain_limit : 0.1;
+  const double stiffening =
+      material_.model == InPlaneModel::kMembrane ? 0.5 * (3.0 * (1.0 + e) * (1.0 + e) - 1.0) : 1.0 + e / (1.0 + e);
+  const double omega2 = stiffening * largest_omega2(true, false) + bend_omega2_;
+  if (!(omega2 > 0.0)) return std::numeric_limits<double>::infinity();
+  const double c = material_.damping;
+  return kStableSafety * (std::sqrt(c * c + 4.0 / omega2) - c);
+}
+
+// An upper bound of the largest eigenvalue of M^-1/2 H M^-1/2 over the free vertices at
+// rest (the squared fastest frequency), for in-plane and/or bending terms: its largest
+// Gershgorin row sum
+double Cloth::largest_omega2(bool stretch, bool bend) const {
+  if (free_count_ == 0) return 0.0;
+  std::vector<cloth_detail::Triplet> triplets;
+  cloth_detail::Assembly what;
+  what.stretch = stretch;
+  what.bend = bend;
+  what.hessian_weight = 1.0;
+  what.matrix_index = &free_index_;
+  what.triplets = &triplets;
+  model_->assemble(x_, what);  // at rest the Hessian equals its material part
+  Eigen::SparseMatrix<double> H(3 * free_count_, 3 * free_count_);
+  H.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::VectorXd inverse_sqrt_mass(3 * free_count_);
+  for (int k = 0; k < vertex_count(); ++k) {
+    if (free_index_[k] >= 0) inverse_sqrt_mass.segment<3>(3 * free_index_[k]).setConstant(1.0 / std::sqrt(mass_[k]));
+  }
+  double omega2 = 0.0;
+  for (int col = 0; col < H.outerSize(); ++col) {  // symmetric: column sums are row sums
+    double sum = 0.0;
+    for (Eigen::SparseMatrix<double>::InnerIterator it(H, col); it; ++it) {
+      sum += std::abs(it.value()) * inverse_sqrt_mass[it.row()];
+    }
+    omega2 = std::max(omega2, sum * inverse_sqrt_mass[col]);
+  }
+  return omega2;
+}
+
+// ---- measurements
+
+double Cloth::elastic_energy() const { return model_->stretch_energy(x_) + model_->bend_energy(x_); }
+
+double Cloth::kinetic_energy() const {
+  double e = 0.0;
+  for (int k = 0; k < vertex_count(); ++k) e += 0.5 * mass_[k] * v_.row(k).squaredNorm();
+  return e;
+}
+
+double Cloth::potential_energy(const Vec3& gravity) const {
+  double e = 0.0;
+  for (int k = 0; k < vertex_count(); ++k) e -= mass_[k] * gravity.dot(row(x_, k));
+  return e;
+}
+
+double Cloth::max_strain() const {
+  double strain = -1.0;
+  for (const cloth_detail::Edge& e : model_->edges()) {
+    strain = std::max(strain, (row(x_, e.j) - row(x_, e.i)).norm() / e.rest - 1.0);
+  }
+  return strain;
+}
+
+Points Cloth::vertex_normals() const {
+  TriangleMesh mesh;
+  mesh.vertices = x_;
+  mesh.triangles = triangles_;
+  return simbake::vertex_normals(mesh);
+}
+
+}  // namespace simbake

@@ -1,0 +1,122 @@
+// Cloth in the world: collisions with level sets and the ground (thickness, Coulomb friction),
+// and cloth pushing dynamic bodies back.
+#include <gtest/gtest.h>
+
+#include "test_support.h"
+
+using namespace simbake;
+using namespace simbake::test;
+
+namespace {
+
+// A square grid cloth in the XZ plane, centred at `centre`, vertex (i, j) at index j * n + i
+ClothDesc square_cloth(double size, int n, const Vec3& centre) {
+  ClothDesc d;
+  d.rest.resize(n * n, 3);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      d.rest.row(j * n + i) << centre.x() + (double(i) / (n - 1) - 0.5) * size, centre.y(),
+          centre.z() + (double(j) / (n - 1) - 0.5) * size;
+    }
+  }
+  d.triangles.resize(2 * (n - 1) * (n - 1), 3);
+  int t = 0;
+  for (int j = 0; j + 1 < n; ++j) {
+    for (int i = 0; i + 1 < n; ++i) {
+      const int p00 = j * n + i, p10 = p00 + 1, p01 = p00 + n, p11 = p01 + 1;
+      d.triangles.row(t++) << p00, p01, p11;
+      d.triangles.row(t++) << p00, p11, p10;
+    }
+  }
+  return d;
+}
+
+}  // namespace
+
+// A cloth draped over a sphere onto the ground never goes further into either than its
+// thickness allows (the contact keeps every vertex at distance >= thickness at each step's
+// end, so the surface itself is never crossed)
+TEST(ClothWorld, DrapeNeverPenetratesSphereOrGround) {
+  World world;
+  world.set_ground(GroundDef{0.0, 0.5, 0.0});
+  BodyDesc ball = sphere_body(0.5, 1.0, Vec3(0.0, 0.5, 0.0));
+  ball.kinematic = true;
+  world.add_body(ball);
+  world.add_cloth(square_cloth(2.0, 24, Vec3(0.0, 1.2, 0.0)), 0.4, 0.005);
+  double deepest = 0.0;
+  for (int f = 0; f < 48; ++f) {
+    world.step_frame(1.0 / 24.0);
+    deepest = std::max(deepest, world.statistics().cloth_penetration);
+  }
+  EXPECT_LT(deepest, 1e-6);
+  // and it did drape: the middle rests on top of the sphere (1 m + thickness), every corner
+  // hangs below the sphere's equator (a square cannot wrap a sphere without folds, so the
+  // corners need not reach the ground), and nothing is below the ground
+  const Points& x = world.cloth(0).positions();
+  const double middle = 0.25 * (x(11 * 24 + 11, 1) + x(11 * 24 + 12, 1) + x(12 * 24 + 11, 1) + x(12 * 24 + 12, 1));
+  EXPECT_NEAR(middle, 1.0 + 0.005, 0.02);
+  for (int corner : {0, 23, 23 * 24, 23 * 24 + 23}) EXPECT_LT(x(corner, 1), 0.5) << corner;
+  EXPECT_GE(x.col(1).minCoeff(), 0.0);
+}
+
+// A cloth lying on the ground under gravity tilted by 30 degrees: friction 0.3 lets it slide
+// at g (sin a - mu cos a); friction 0.8 holds it
+TEST(ClothWorld, ClothOnTiltedGroundSlidesAndSticksPerCoulomb) {
+  const double angle = 30.0 * M_PI / 180.0, g = 9.81;
+  for (double mu : {0.3, 0.8}) {
+    WorldSettings settings;
+    settings.gravity = Vec3(-g * std::sin(angle), -g * std::cos(angle), 0.0);
+    World world(settings);
+    world.set_ground(GroundDef{0.0, mu, 0.0});
+    world.add_cloth(square_cloth(0.5, 8, Vec3(0.0, 0.005, 0.0)), mu, 0.005);
+    const double t = 1.0;
+    for (int f = 0; f < 24; ++f) world.step_frame(1.0 / 24.0);
+    const double moved = -world.cloth(0).positions().col(0).mean();
+    if (mu < std::tan(angle)) {
+      const double a = g * (std::sin(angle) - mu * std::cos(angle));
+      EXPECT_NEAR(moved / (0.5 * a * t * t), 1.0, 0.05) << mu;
+    } else {
+      EXPECT_LT(std::abs(moved), 2e-3) << mu;
+    }
+  }
+}
+
+// A hammock pinned at its corners holds a dynamic ball: the ball comes to rest on the
+// cloth (pushed back by it) instead of falling through, and the cloth sags under it
+TEST(ClothWorld, PinnedClothHoldsADynamicBall) {
+  World world;
+  ClothDesc hammock = square_cloth(1.0, 21, Vec3(0.0, 1.0, 0.0));
+  hammock.pinned = {0, 20, 20 * 21, 20 * 21 + 20};
+  hammock.material.stretch_stiffness = 5000.0;
+  world.add_cloth(hammock, 0.5, 0.005);
+  world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 1.3, 0.0)));
+  for (int f = 0; f < 72; ++f) world.step_frame(1.0 / 24.0);
+  const double ball_y = world.body_state(0).x.y();
+  EXPECT_GT(ball_y, 0.5);                      // held, not fallen through
+  EXPECT_LT(ball_y, 1.0 + 0.15);               // the cloth sags under it
+  EXPECT_LT(world.body_state(0).v.norm(), 0.05);  // at rest
+  EXPECT_LT(world.statistics().cloth_penetration, 1e-3);
+}
+
+// Momentum exchanged between a cloth and a free body is equal and opposite: with no gravity
+// and no ground, a cloth thrown at a resting ball leaves the total momentum unchanged
+TEST(ClothWorld, ClothAndBodyExchangeMomentumEqually) {
+  WorldSettings settings;
+  settings.gravity = Vec3::Zero();
+  settings.sleep_time = 0.0;
+  World world(settings);
+  ClothDesc sheet = square_cloth(1.0, 11, Vec3(0.0, 1.0, 0.0));
+  const int c = world.add_cloth(sheet, 0.0, 0.005);
+  world.cloth(c).velocities().col(1).setConstant(-2.0);
+  world.add_body(sphere_body(0.2, 0.3, Vec3(0.0, 0.5, 0.0)));
+  auto momentum = [&] {
+    Vec3 p = world.body_state(0).v / world.body_def(0).inverse_mass;
+    const Cloth& cloth = world.cloth(c);
+    for (int k = 0; k < cloth.vertex_count(); ++k) p += cloth.masses()[k] * Vec3(cloth.velocities().row(k).transpose());
+    return p;
+  };
+  const Vec3 p0 = momentum();
+  for (int f = 0; f < 12; ++f) world.step_frame(1.0 / 24.0);
+  EXPECT_LT(world.body_state(0).v.y(), -0.1);  // the ball was pushed
+  EXPECT_LT((momentum() - p0).norm(), 1e-6 * p0.norm());
+}
