@@ -94,7 +94,6 @@ class Cloth {
   std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
   int free_count_ = 0;
   double stable_step_ = 0.0;     // stable_explicit_step(), computed once
-  double bend_omega2_ = 0.0;     // bound of the squared fastest bending frequency at rest (1/s^2)
   std::vector<int> forward_order_, backward_order_;  // the strain limiter's sweep orders
 
   void explicit_velocities(double dt, const Vec3& gravity);

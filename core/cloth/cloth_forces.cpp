@@ -418,11 +418,7 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
 
   // bending: W = 1/2 B w (theta - theta0)^2 per hinge; Gauss-Newton Hessian B w grad grad^T
   if (material_.bend_stiffness == 0.0 || !what.bend) return;
-  Assembly bending = what;
-  if (!what.bend_matrix) bending.triplets = nullptr;
-  const bool need_gauss_newton =
-      (bending.triplets != nullptr && (what.hessian_weight != 0.0 || what.material_weight != 0.0)) ||
-      (velocity_terms && what.damping != 0.0);
+  const bool need_gauss_newton = need_hessian || need_material;
   Mat12 gauss_newton = Mat12::Zero();
   for (const Hinge& h : hinges_) {
     const Vec3 p0 = row(x, h.v[0]), p1 = row(x, h.v[1]), p2 = row(x, h.v[2]), p3 = row(x, h.v[3]);
@@ -430,7 +426,7 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
     const double d = angle_difference(dihedral_angle(p0, p1, p2, p3), h.rest_angle);
     const Vec12 grad_theta = dihedral_angle_gradient(p0, p1, p2, p3);
     if (need_gauss_newton) gauss_newton = k * grad_theta * grad_theta.transpose();
-    scatter<4>(h.v, Vec12(k * d * grad_theta), gauss_newton, gauss_newton, bending);
+    scatter<4>(h.v, Vec12(k * d * grad_theta), gauss_newton, gauss_newton, what);
   }
 }
 

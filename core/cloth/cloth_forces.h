@@ -86,7 +86,6 @@ struct MembraneElement {
 // What to assemble at positions x. Every output is optional (null: skipped).
 struct Assembly {
   bool stretch = true, bend = true;  // which elements take part
-  bool bend_matrix = true;           // false: bending adds forces but no matrix entries
   bool elastic = true;               // force += -dW/dx
   const Points* velocity = nullptr;  // needed by damping
   double damping = 0.0;              // force += -damping * H_material v (Rayleigh, stiffness-proportional)

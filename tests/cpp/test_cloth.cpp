@@ -575,7 +575,8 @@ TEST(ClothDamping, RigidMotionIsNotDamped) {
 
 // A square of very soft springs (E = 1 N: its own weight alone would stretch it by ~100%)
 // pinned at two corners, falling under gravity: the impulses keep every edge within the 10%
-// limit at every step (tolerance 1e-3: the Gauss-Seidel sweeps stop at 1e-6 corrections), the
+// limit at every step (tolerance 1e-3; the limiter stops when every edge is within 1e-6 of
+// its bound, the global pass taking over where Gauss-Seidel sweeps converge too slowly), the
 // limit is reached, and the pinned corners never move.
 TEST(ClothStrainLimit, SoftClothNeverStretchesBeyondTheLimit) {
   for (ClothIntegrator integrator : {ClothIntegrator::kImplicit, ClothIntegrator::kExplicit}) {

@@ -486,10 +486,11 @@ def test_cloth_cache_has_sampled_points_normals_extent_velocities(write_scene, t
     # the pinned corners stay; the free edge falls (half a second under gravity)
     assert np.allclose(points[1][[0, 10]], points[0][[0, 10]])
     assert points[1][60][1] < 0.9
-    # velocities are metres per second: they agree with the motion between frames
-    v = np.array(mesh.GetAttribute("velocities").Get(12))
+    # velocities are metres per second: the mean of the two ends' velocities agrees with the
+    # motion between the frames (the trapezoid rule; 10% covers the frame's own curvature)
+    v = 0.5 * (np.array(mesh.GetAttribute("velocities").Get(12)) + np.array(mesh.GetAttribute("velocities").Get(13)))
     finite_difference = (np.array(mesh.GetAttribute("points").Get(13)) - np.array(mesh.GetAttribute("points").Get(12))) * 24
-    assert np.abs(v - finite_difference).max() < 0.2 * np.abs(finite_difference).max() + 1e-3
+    assert np.abs(v - finite_difference).max() < 0.1 * np.abs(finite_difference).max() + 1e-3
     assert stats.frames == 13
 
 
