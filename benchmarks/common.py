@@ -357,3 +357,29 @@ def run_and_write(run: Callable[[], Result]) -> Result:
 
 def main(run: Callable[[], Result]) -> None:
     run_and_write(run)
+
+
+def run_benchmarks(modules, names: list[str], summary_name: str, label: str, extra: dict | None = None) -> None:
+    """Run the benchmark modules named in `names` (all when empty), write each one's results
+    and a summary RESULTS_DIR/<summary_name> with the seconds each took."""
+    import json
+    import sys
+    import time
+
+    known = {module.NAME: module for module in modules}
+    unknown = [name for name in names if name not in known]
+    if unknown:
+        sys.exit(f"unknown benchmark(s): {', '.join(unknown)}; known: {', '.join(known)}")
+    chosen = [module for module in modules if not names or module.NAME in names]
+    start = time.perf_counter()
+    seconds = {}
+    for module in chosen:
+        t0 = time.perf_counter()
+        run_and_write(module.run)
+        seconds[module.NAME] = time.perf_counter() - t0
+    total = time.perf_counter() - start
+    summary = {"machine": machine_info(), **(extra or {}), "benchmark_seconds": seconds, "total_seconds": total}
+    RESULTS_DIR.mkdir(parents=True, exist_ok=True)
+    (RESULTS_DIR / summary_name).write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"\n{label}: {len(chosen)} benchmark(s) in {total:.1f} s "
+          f"({', '.join(f'{k} {v:.1f} s' for k, v in seconds.items())})")

@@ -10,9 +10,7 @@ processes and every pile run is its own child process, so the order does not mat
 
 from __future__ import annotations
 
-import json
 import sys
-import time
 
 import common_rigid as cr
 from common_rigid import common
@@ -25,24 +23,8 @@ BENCHMARKS = [contact_accuracy, stacks, ring_toss, piles]
 
 
 def main(names: list[str]) -> None:
-    known = {module.NAME: module for module in BENCHMARKS}
-    unknown = [name for name in names if name not in known]
-    if unknown:
-        sys.exit(f"unknown benchmark(s): {', '.join(unknown)}; known: {', '.join(known)}")
-    chosen = [module for module in BENCHMARKS if not names or module.NAME in names]
-    start = time.perf_counter()
-    seconds = {}
-    for module in chosen:
-        t0 = time.perf_counter()
-        common.run_and_write(module.run)
-        seconds[module.NAME] = time.perf_counter() - t0
-    total = time.perf_counter() - start
-    summary = {"machine": common.machine_info(), "core_module": cr.core_module_info(),
-               "benchmark_seconds": seconds, "total_seconds": total}
-    common.RESULTS_DIR.mkdir(parents=True, exist_ok=True)
-    (common.RESULTS_DIR / "rigid_run_all.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(f"\nrigid/run_all: {len(chosen)} benchmark(s) in {total:.1f} s "
-          f"({', '.join(f'{k} {v:.1f} s' for k, v in seconds.items())})")
+    common.run_benchmarks(BENCHMARKS, names, "rigid_run_all.json", "rigid/run_all",
+                          extra={"core_module": cr.core_module_info()})
 
 
 if __name__ == "__main__":
