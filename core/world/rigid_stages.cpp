@@ -124,12 +124,18 @@ void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const
   }
 }
 
-// K = K_a + K_b at the point, lever arms from the candidate centres of mass; immovable
-// bodies (ground, kinematic, frozen) contribute nothing
+// Body i's K at world point x, lever arm from its candidate centre of mass; zero for the
+// ground and kinematic bodies
+Mat3 World::body_impulse_matrix(int i, const Vec3& x) const {
+  if (i == kGround || defs_[i].kinematic) return Mat3::Zero();
+  return impulse_matrix(defs_[i].inverse_mass, inverse_inertia_[i], x - candidates_[i].x);
+}
+
+// K = K_a + K_b at the point; immovable bodies (ground, kinematic, frozen) contribute nothing
 Mat3 World::pair_impulse_matrix(const Penetration& p) const {
   Mat3 K = Mat3::Zero();
   for (int i : {p.a, p.b}) {
-    if (movable(i)) K += impulse_matrix(defs_[i].inverse_mass, inverse_inertia_[i], p.x - candidates_[i].x);
+    if (movable(i)) K += body_impulse_matrix(i, p.x);
   }
   return K;
 }
@@ -289,12 +295,13 @@ void World::reduce_to_four(std::vector<Penetration>& points) {
   points.swap(kept);
 }
 
-// Reduces the points of one pair and direction (points[begin, end), deepest first) group by
-// group: a group is every remaining point whose normal is within ~25 degrees of the deepest
-// remaining one's, so points that push different ways (an edge caught on a side face, the
-// two arms of a torus on a post) keep their own representatives
-void World::reduce_contact_points(std::vector<Penetration>& points, std::size_t begin) {
-  std::vector<Penetration> rest(points.begin() + begin, points.end()), result, group, others;
+// Reduces the points of one pair and direction (deepest first) group by group: a group is
+// every remaining point whose normal is within ~25 degrees of the deepest remaining one's,
+// so points that push different ways (an edge caught on a side face, the two arms of a
+// torus on a post) keep their own representatives
+void World::reduce_contact_points(std::vector<Penetration>& points) {
+  std::vector<Penetration> rest, result, group, others;
+  rest.swap(points);
   while (!rest.empty()) {
     group.clear();
     others.clear();
@@ -304,8 +311,7 @@ void World::reduce_contact_points(std::vector<Penetration>& points, std::size_t 
     result.insert(result.end(), group.begin(), group.end());
     rest.swap(others);
   }
-  points.resize(begin);
-  points.insert(points.end(), result.begin(), result.end());
+  points.swap(result);
 }
 
 bool World::deeper(const Penetration& l, const Penetration& r) { return l.phi < r.phi; }
@@ -328,29 +334,22 @@ void World::find_contacts() {
   find_pair_penetrations(found);
   tbb::parallel_for(std::size_t(0), found.size(), [&](std::size_t k) {
     std::vector<Penetration>& points = found[k];
-    const auto reverse = std::stable_partition(points.begin(), points.end(),
-                                               [&](const Penetration& p) { return p.a == pairs_[k].a; });
-    const std::size_t split = reverse - points.begin();
-    std::stable_sort(points.begin(), points.begin() + split, deeper);
-    std::stable_sort(points.begin() + split, points.end(), deeper);
-    std::vector<Penetration> second(points.begin() + split, points.end());
-    points.resize(split);
-    reduce_contact_points(points, 0);
-    reduce_contact_points(second, 0);
-    points.insert(points.end(), second.begin(), second.end());
+    const auto split = std::stable_partition(points.begin(), points.end(),
+                                             [&](const Penetration& p) { return p.a == pairs_[k].a; });
+    std::vector<Penetration> reverse(split, points.end());
+    points.erase(split, points.end());
+    for (std::vector<Penetration>* side : {&points, &reverse}) {
+      std::stable_sort(side->begin(), side->end(), deeper);
+      reduce_contact_points(*side);
+    }
+    points.insert(points.end(), reverse.begin(), reverse.end());
     std::stable_sort(points.begin(), points.end(), deeper);
   });
   contacts_.clear();
   for (std::size_t k = 0; k < found.size(); ++k) {
     for (const Penetration& p : found[k]) {
-      ContactPoint contact{p, pairs_[k].friction};
-      if (p.a != kGround && !defs_[p.a].kinematic) {
-        contact.k_a = impulse_matrix(defs_[p.a].inverse_mass, inverse_inertia_[p.a], p.x - candidates_[p.a].x);
-      }
-      if (p.b != kGround && !defs_[p.b].kinematic) {
-        contact.k_b = impulse_matrix(defs_[p.b].inverse_mass, inverse_inertia_[p.b], p.x - candidates_[p.b].x);
-      }
-      contacts_.push_back(contact);
+      contacts_.push_back({p, pairs_[k].friction, Vec3::Zero(), body_impulse_matrix(p.a, p.x),
+                           body_impulse_matrix(p.b, p.x)});
     }
   }
 }

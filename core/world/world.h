@@ -193,13 +193,14 @@ class World {
   void refresh_stale_candidates();
   Vec3 point_velocity(int i, const Vec3& x) const;
   void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
+  Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
   void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
   void find_contacts();
   static void reduce_to_four(std::vector<Penetration>& points);
-  static void reduce_contact_points(std::vector<Penetration>& points, std::size_t begin);
+  static void reduce_contact_points(std::vector<Penetration>& points);
   static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact);
@@ -232,7 +233,6 @@ class World {
   std::vector<double> cloth_friction_;      // (ncloth) Coulomb coefficient against bodies and ground
   std::vector<double> cloth_thickness_;     // (ncloth) distance kept from surfaces (m)
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
-  std::vector<Penetration> scratch_;        // reused by the impulse stages
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
   std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
