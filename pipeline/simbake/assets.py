@@ -58,17 +58,24 @@ def cache_dir() -> Path:
     return Path(base) / "simbake"
 
 
-def load_mesh(path: Path, file: str | Path, key: str) -> tuple[np.ndarray, np.ndarray]:
-    """A closed triangle mesh from any file trimesh reads, or a SceneError."""
+def read_triangles(path: Path, file: str | Path, key: str, process: bool):
+    """The trimesh.Trimesh in any file trimesh reads, with at least one triangle, or a
+    one-line SceneError. process=False keeps the file's vertex order."""
     import trimesh
 
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        mesh = trimesh.load(str(path), force="mesh", process=process)
     except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
         detail = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise SceneError(file, key, f"cannot read mesh {path}: {detail}") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise SceneError(file, key, f"{path} holds no triangles")
+    return mesh
+
+
+def load_mesh(path: Path, file: str | Path, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """A closed triangle mesh from any file trimesh reads, or a SceneError."""
+    mesh = read_triangles(path, file, key, process=True)
     if not mesh.is_watertight:
         raise SceneError(file, key, f"{path} is not a closed mesh (it has holes or open edges); "
                                     "a rigid body needs a closed surface")
@@ -215,18 +222,11 @@ def _rotate(q: tuple[float, float, float, float], points: np.ndarray) -> np.ndar
 
 
 def load_cloth(scene: Scene, index: int) -> ClothAsset:
-    import trimesh
-
     cloth = scene.cloths[index]
     key, file = f"cloths[{index}]", scene.source or str(scene.path)
     if cloth.mesh_path is not None:
-        try:
-            # process=False keeps the file's vertex order: `pinned` indexes the file's vertices
-            mesh = trimesh.load(str(cloth.mesh_path), force="mesh", process=False)
-        except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
-            raise SceneError(file, f"{key}.mesh", f"cannot read mesh {cloth.mesh_path}: {error}") from None
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            raise SceneError(file, f"{key}.mesh", f"{cloth.mesh_path} holds no triangles")
+        # the file's vertex order is kept: `pinned` indexes the file's vertices
+        mesh = read_triangles(cloth.mesh_path, file, f"{key}.mesh", process=False)
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
         triangles = np.asarray(mesh.faces, dtype=np.int32)
     else:

@@ -507,3 +507,19 @@ def test_cloth_pinned_index_out_of_range_for_a_mesh_is_an_error(write_scene, mes
         simbake.bake(simbake.load_scene(scene_path), tmp_path / "cape.usdc")
     assert info.value.key == "cloths[0].pinned" and "99999" in str(info.value)
     assert not (tmp_path / "cape.usdc").exists()
+
+
+def test_unreadable_cloth_mesh_is_a_one_line_error(write_scene, tmp_path):
+    (tmp_path / "junk.obj").write_text("v 0 0\nf 1 2\nthis is not a mesh\n")
+    scene_path = write_scene("""
+        [scene]
+        end_frame = 3
+        [[cloths]]
+        name = "cape"
+        mesh = "junk.obj"
+    """)
+    with pytest.raises(simbake.SceneError) as info:
+        simbake.bake(simbake.load_scene(scene_path), tmp_path / "cape.usdc")
+    assert info.value.key == "cloths[0].mesh" and "junk.obj" in str(info.value)
+    assert "\n" not in str(info.value)
+    assert not (tmp_path / "cape.usdc").exists()
