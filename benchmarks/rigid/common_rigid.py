@@ -62,32 +62,18 @@ def load(name: str):
 
 
 def make_world(scene, assets, **settings) -> "_core.World":
-    """simulate.build_world(scene, assets), but with World(**settings) (max_substep,
-    threads, ...). Mirrors build_world's body calls one for one; threads defaults to 1.
-    Rigid scenes only: a scene with cloth is refused."""
+    """simulate.build_world(scene, assets) with World(**settings) (max_substep, threads, ...);
+    threads defaults to 1. Rigid scenes only: a scene with cloth is refused."""
     if getattr(scene, "cloths", ()):
         raise ValueError(f"{scene.path.name}: make_world builds rigid bodies only, this scene has cloth")
     settings.setdefault("threads", THREADS)
-    world = _core.World(gravity=np.array(scene.gravity), **settings)
-    if scene.ground is not None:
-        world.set_ground(scene.ground.height, scene.ground.friction, scene.ground.restitution)
-    for index, (body, asset) in enumerate(zip(scene.bodies, assets)):
-        volume = asset.mass_properties["volume"]
-        mass = body.mass if body.mass is not None else body.density * volume
-        world.add_body(asset.level_set, asset.samples, asset.mass_properties, mass,
-                       np.array(body.position), np.array(body.orientation),
-                       np.array(body.linear_velocity), np.array(body.angular_velocity),
-                       body.friction, body.restitution, body.kinematic)
-        if body.keys:
-            world.set_kinematic_track(index, [k.time for k in body.keys],
-                                      np.array([k.position for k in body.keys]),
-                                      np.array([k.orientation for k in body.keys]))
-    return world
+    return sb_simulate.build_world(scene, assets, **settings)
 
 
 def check_mirror(scene, assets, frames: int = 24) -> dict:
-    """make_world(defaults) against the pipeline's build_world over `frames` frames:
-    the poses must be bit-identical (the core's results do not depend on the thread count)."""
+    """make_world (one thread) against the pipeline's build_world (all cores) over `frames`
+    frames: the poses must be bit-identical (the core's results do not depend on the thread
+    count)."""
     a = sb_simulate.build_world(scene, assets)
     b = make_world(scene, assets)
     for _ in range(frames):

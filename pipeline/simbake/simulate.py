@@ -38,9 +38,10 @@ class BakeStats:
                 f"max penetration {self.max_penetration * 1000:.3f} mm -> {self.output}")
 
 
-def build_world(scene: Scene, assets: list[BodyAsset],
-                cloths: list[ClothAsset] = ()) -> "_core.World":
-    world = _core.World(gravity=np.array(scene.gravity))
+def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] = (),
+                **settings) -> "_core.World":
+    """The core World for the scene; `settings` go to _core.World (max_substep, threads, ...)."""
+    world = _core.World(gravity=np.array(scene.gravity), **settings)
     if scene.ground is not None:
         world.set_ground(scene.ground.height, scene.ground.friction, scene.ground.restitution)
     for index, (body, asset) in enumerate(zip(scene.bodies, assets)):
