@@ -29,7 +29,8 @@ enum class ClothIntegrator { kExplicit, kImplicit };
 
 struct ClothMaterial {
   InPlaneModel model = InPlaneModel::kSprings;
-  double stretch_stiffness = 1000.0;  // springs: E in W = 1/2 E (|A| - 1)^2 L (N); membrane: Young's modulus x thickness (N/m)
+  double stretch_stiffness = 1000.0;  // the sheet's stiffness Y (N/m): the membrane's Young's modulus x
+                                      // thickness; springs get E = Y x (area share) / L each (cloth.cpp)
   double poisson_ratio = 0.3;         // membrane only
   double bend_stiffness = 1e-4;       // B (N m): bending energy density 1/2 B (1/R1 + 1/R2)^2
   double damping = 0.01;              // Rayleigh stiffness-proportional damping coefficient (s)

@@ -333,7 +333,11 @@ ForceModel::ForceModel(const Points& rest, const Triangles& triangles, const Clo
     size_t end = s;
     while (end < sides.size() && sides[end].a == sides[s].a && sides[end].b == sides[s].b) ++end;
     const Side& first = sides[s];
-    edges_.push_back({first.a, first.b, (row(rest, first.b) - row(rest, first.a)).norm()});
+    Edge edge{first.a, first.b, (row(rest, first.b) - row(rest, first.a)).norm()};
+    double share = 0.0;  // a third of each adjacent triangle's rest area
+    for (size_t t = s; t < end; ++t) share += area(sides[t].triangle) / 3.0;
+    edge.stiffness = edge.rest > 0.0 ? material.stretch_stiffness * share / edge.rest : 0.0;
+    edges_.push_back(edge);
     if (end - s == 2) {
       const Side& second = sides[s + 1];
       Hinge h;
@@ -364,7 +368,7 @@ double ForceModel::stretch_energy(const Points& x) const {
   double w = 0.0;
   if (material_.model == InPlaneModel::kSprings) {
     for (const Edge& e : edges_) {
-      w += spring_energy(row(x, e.i), row(x, e.j), e.rest, material_.stretch_stiffness, compress_scale_);
+      w += spring_energy(row(x, e.i), row(x, e.j), e.rest, e.stiffness, compress_scale_);
     }
   } else {
     for (const MembraneElement& m : membranes_) {
@@ -399,7 +403,7 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
     Vec6 gradient;
     Mat6 hessian = Mat6::Zero(), material = Mat6::Zero();
     for (const Edge& e : edges_) {
-      spring_terms(row(x, e.i), row(x, e.j), e.rest, material_.stretch_stiffness, compress_scale_, &gradient,
+      spring_terms(row(x, e.i), row(x, e.j), e.rest, e.stiffness, compress_scale_, &gradient,
                    need_hessian ? &hessian : nullptr, need_material ? &material : nullptr);
       const int v[2] = {e.i, e.j};
       scatter<2>(v, gradient, hessian, material, what);
