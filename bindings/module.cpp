@@ -131,7 +131,7 @@ PYBIND11_MODULE(_core, m) {
   // the world
   py::class_<World>(m, "World")
       .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
-                       double travel_fraction, int max_substeps, int threads) {
+                       double travel_fraction, int max_substeps, int threads, double cloth_max_substep) {
              WorldSettings s;
              s.gravity = gravity;
              s.collision_sweeps = collision_sweeps;
@@ -140,6 +140,7 @@ PYBIND11_MODULE(_core, m) {
              s.travel_fraction = travel_fraction;
              s.max_substeps = max_substeps;
              s.threads = threads;
+             s.cloth_max_substep = cloth_max_substep;
              return World(s);
            }),
            py::arg("gravity") = WorldSettings().gravity,
@@ -148,7 +149,8 @@ PYBIND11_MODULE(_core, m) {
            py::arg("max_substep") = WorldSettings().max_substep,
            py::arg("travel_fraction") = WorldSettings().travel_fraction,
            py::arg("max_substeps") = WorldSettings().max_substeps,
-           py::arg("threads") = WorldSettings().threads)
+           py::arg("threads") = WorldSettings().threads,
+           py::arg("cloth_max_substep") = WorldSettings().cloth_max_substep)
       .def("set_ground", [](World& w, double height, double friction, double restitution) {
              w.set_ground(GroundDef{height, friction, restitution});
            }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)
@@ -178,7 +180,7 @@ PYBIND11_MODULE(_core, m) {
                            const std::string& model, double stretch_stiffness, double poisson_ratio,
                            double bend_stiffness, double damping, double strain_limit, const std::string& compression,
                            const std::vector<int>& pinned, const std::string& integrator, double friction,
-                           double thickness) {
+                           double thickness, double tolerance) {
              ClothDesc d;
              d.rest = rest;
              d.triangles = triangles;
@@ -194,13 +196,14 @@ PYBIND11_MODULE(_core, m) {
                                                                             {"none", CompressionMode::kNone}});
              d.pinned = pinned;
              d.integrator = choose<ClothIntegrator>(integrator, {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}});
+             d.tolerance = tolerance;
              return w.add_cloth(d, friction, thickness);
            },
            py::arg("rest"), py::arg("triangles"), py::arg("area_density") = 0.1, py::arg("model") = "springs",
            py::arg("stretch_stiffness") = 1000.0, py::arg("poisson_ratio") = 0.3, py::arg("bend_stiffness") = 1e-4,
            py::arg("damping") = 0.01, py::arg("strain_limit") = 0.1, py::arg("compression") = "subgrid",
            py::arg("pinned") = std::vector<int>(), py::arg("integrator") = "implicit", py::arg("friction") = 0.3,
-           py::arg("thickness") = 0.005)
+           py::arg("thickness") = 0.005, py::arg("tolerance") = ClothDesc().tolerance)
       .def_property_readonly("cloth_count", &World::cloth_count)
       .def("cloth_state", [](const World& w, int i) {
              if (i < 0 || i >= w.cloth_count()) throw py::index_error("cloth index out of range");
@@ -226,6 +229,7 @@ PYBIND11_MODULE(_core, m) {
            py::call_guard<py::gil_scoped_release>())
       .def("step", &World::step, py::arg("dt"), py::call_guard<py::gil_scoped_release>())
       .def("automatic_substeps", &World::automatic_substeps, py::arg("frame_dt"))
+      .def("automatic_cloth_steps", &World::automatic_cloth_steps, py::arg("frame_dt"))
       .def_property_readonly("body_count", &World::body_count)
       .def("mesh_poses", [](const World& w) {
              Points translations(w.body_count(), 3);
@@ -256,6 +260,7 @@ PYBIND11_MODULE(_core, m) {
              const StepStatistics& s = w.statistics();
              py::dict d;
              d["substeps"] = s.substeps;
+             d["cloth_steps"] = s.cloth_steps;
              d["max_penetration"] = s.max_penetration;
              d["kinetic_energy"] = s.kinetic_energy;
              d["potential_energy"] = s.potential_energy;
@@ -264,6 +269,9 @@ PYBIND11_MODULE(_core, m) {
              d["elastic_energy"] = s.elastic_energy;
              d["cloth_penetration"] = s.cloth_penetration;
              d["max_cloth_strain"] = s.max_cloth_strain;
+             long long iterations = 0;
+             for (int i = 0; i < w.cloth_count(); ++i) iterations += w.cloth(i).solver_iterations();
+             d["cloth_solver_iterations"] = iterations;
              return d;
            })
       .def("profile", [](const World& w) {

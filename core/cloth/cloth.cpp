@@ -85,10 +85,12 @@
 // semi-definite element by element (springs: the transverse term dropped under compression;
 // membrane: the 9x9 Hessian projected by eigen-decomposition; bending: its Gauss-Newton part
 // only), so M + dt^2 H + damping dt H_m is symmetric positive definite. It is assembled
-// from triplets into an Eigen sparse matrix over the unpinned vertices only (pinned rows and
-// columns removed: their velocity is zero and stays so), scaled by M^-1/2 on both sides, and
-// solved with a sparse Cholesky factorization (SimplicialLDLT; conjugate gradients needed
-// 1700-2000 iterations for the default material and were 2-2.4x slower).
+// straight into an Eigen sparse matrix of fixed pattern (MatrixPattern, built once) over the
+// unpinned vertices only (pinned rows and columns removed: their velocity is zero and stays
+// so), scaled by M^-1/2 on both sides, and solved by Jacobi-preconditioned conjugate
+// gradients to a relative residual `tolerance`, started from the last step's solution.
+// (A sparse Cholesky factorization each step, SimplicialLDLT, was 10x slower on the 64 x 64
+// drape; see benchmarks/cloth.)
 // For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
 // (the exact solution changes the total momentum by dt M g only). Gravity is an external
 // force m g on unpinned vertices.
@@ -122,6 +124,7 @@
 // inextensible cloth", with an active set for the inequality). Both stop when every edge is
 // within 1e-6 L of its bound. Impulses are internal, so momentum is kept.
 #include "cloth/cloth.h"
+#include <Eigen/IterativeLinearSolvers>
 
 #include "cloth/cloth_forces.h"
 #include "geometry/mesh.h"
@@ -138,6 +141,13 @@
 
 namespace simbake {
 
+// The implicit step's scratch: the system matrix (the cloth's fixed pattern) and the last
+// solution
+struct Cloth::ImplicitSolver {
+  Eigen::SparseMatrix<double> system;
+  Eigen::VectorXd guess;  // the last solution, where the next solve starts
+};
+
 namespace {
 
 constexpr int kStrainSweeps = 8;            // Gauss-Seidel sweeps of the strain limiter before the global pass
@@ -146,6 +156,7 @@ constexpr int kActiveSetPasses = 8;         // most active-set updates per Newto
 constexpr double kStrainTolerance = 1e-6;   // strain limiting is done when every edge is this close (x L)
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
+constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);
@@ -167,8 +178,8 @@ double strain_target(double length, double rest, double limit, bool enforce) {
 // the edge-length rate that damping sees is then O(a^3) of the rotation's own velocities;
 // at x or at x + dt v it would be O(a), which times a large stiffness visibly slows spins.
 void add_damping(const cloth_detail::ForceModel& model, double damping, const Points& x, const Points& v,
-                 double dt, const std::vector<int>& matrix_index, double matrix_weight, Eigen::VectorXd& force,
-                 std::vector<cloth_detail::Triplet>* triplets) {
+                 double dt, double matrix_weight, Eigen::VectorXd& force, const cloth_detail::MatrixPattern* pattern,
+                 Eigen::SparseMatrix<double>* matrix) {
   if (damping == 0.0) return;
   const Points midpoint = x + (0.5 * dt) * v;
   cloth_detail::Assembly what;
@@ -176,16 +187,20 @@ void add_damping(const cloth_detail::ForceModel& model, double damping, const Po
   what.velocity = &v;
   what.damping = damping;
   what.material_weight = matrix_weight;
-  what.matrix_index = &matrix_index;
   what.force = &force;
-  what.triplets = triplets;
+  what.pattern = pattern;
+  what.matrix = matrix;
   model.assemble(midpoint, what);
 }
 
 }  // namespace
 
 Cloth::Cloth(const ClothDesc& desc)
-    : material_(desc.material), integrator_(desc.integrator), triangles_(desc.triangles), x_(desc.rest) {
+    : material_(desc.material),
+      integrator_(desc.integrator),
+      tolerance_(desc.tolerance),
+      triangles_(desc.triangles),
+      x_(desc.rest) {
   // validate the description
   const int n = static_cast<int>(desc.rest.rows());
   require(n >= 3, "needs at least 3 vertices");
@@ -199,6 +214,7 @@ Cloth::Cloth(const ClothDesc& desc)
   require(m.damping >= 0.0 && std::isfinite(m.damping), "damping must be >= 0");
   require(m.strain_limit >= 0.0 && std::isfinite(m.strain_limit), "strain_limit must be >= 0");
   require(m.subgrid_scale >= 0.0 && m.subgrid_scale <= 1.0, "subgrid_scale must be in [0, 1]");
+  require(desc.tolerance > 0.0 && desc.tolerance < 1.0, "tolerance must be in (0, 1)");
 
   // lumped masses: a third of each triangle's rest area times the area density
   mass_ = Eigen::VectorXd::Zero(n);
@@ -230,6 +246,7 @@ Cloth::Cloth(const ClothDesc& desc)
   // state: at rest, still
   v_ = Points::Zero(n, 3);
   model_ = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
+  pattern_ = std::make_shared<const cloth_detail::MatrixPattern>(*model_, free_index_);
 
   // the strain limiter's edge orders: as stored (sorted by vertex indices), and reversed
   forward_order_.resize(model_->edges().size());
@@ -259,7 +276,7 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity) {
   cloth_detail::Assembly what;
   what.force = &force;
   model_->assemble(x_, what);
-  add_damping(*model_, material_.damping, x_, v_, dt, free_index_, 0.0, force, nullptr);
+  add_damping(*model_, material_.damping, x_, v_, dt, 0.0, force, nullptr, nullptr);
   for (int k = 0; k < vertex_count(); ++k) {
     if (pinned_[k]) continue;
     v_.row(k) += dt * (force.segment<3>(3 * k) / mass_[k] + gravity).transpose();
@@ -272,20 +289,20 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity) {
 void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
   if (free_count_ == 0) return;
   const int n = vertex_count();
-  // elastic forces at the prediction and the matrix's stiffness triplets, then damping
+  ImplicitSolver& solver = solver_.get();
+  Eigen::SparseMatrix<double>& system = solver.system;
+  if (system.rows() == 0) system = pattern_->make_matrix();
+  system.coeffs().setZero();
+  // elastic forces at the prediction and their Hessian, then damping at the midpoint
   Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * n);
-  std::vector<cloth_detail::Triplet> triplets;
-  const size_t per_pass = 36 * model_->edges().size() + 81 * model_->membranes().size() +
-                          (material_.bend_stiffness > 0.0 ? 144 * model_->hinges().size() : 0);
-  triplets.reserve((material_.damping > 0.0 ? 2 : 1) * per_pass + 3 * free_count_);
   const Points predicted = x_ + dt * v_;
   cloth_detail::Assembly what;
   what.hessian_weight = dt * dt;
-  what.matrix_index = &free_index_;
   what.force = &force;
-  what.triplets = &triplets;
+  what.pattern = pattern_.get();
+  what.matrix = &system;
   model_->assemble(predicted, what);
-  add_damping(*model_, material_.damping, x_, v_, dt, free_index_, material_.damping * dt, force, &triplets);
+  add_damping(*model_, material_.damping, x_, v_, dt, material_.damping * dt, force, pattern_.get(), &system);
   // the mass diagonal and the right-hand side, over free vertices only; the system is
   // scaled by M^-1/2 on both sides (unknown z = M^1/2 dv), so that the residual is measured
   // in the norm that bounds the velocity error in kinetic-energy terms, |e|_M <= |r|_(M^-1)
@@ -294,20 +311,24 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
     const int i = free_index_[k];
     if (i < 0) continue;
     for (int r = 0; r < 3; ++r) {
-      triplets.emplace_back(3 * i + r, 3 * i + r, mass_[k]);
+      system.coeffRef(3 * i + r, 3 * i + r) += mass_[k];
       scale[3 * i + r] = 1.0 / std::sqrt(mass_[k]);
       rhs[3 * i + r] = dt * (force[3 * k + r] + mass_[k] * gravity[r]) * scale[3 * i + r];
     }
   }
-  Eigen::SparseMatrix<double> system(3 * free_count_, 3 * free_count_);
-  system.setFromTriplets(triplets.begin(), triplets.end());
-  system = scale.asDiagonal() * system * scale.asDiagonal();
-  // sparse Cholesky (LDL^T; the matrix is symmetric positive definite). Measured against
-  // Jacobi-preconditioned conjugate gradients at a 1e-6 residual, which needs 1700-2000
-  // iterations for the default material at frame-rate substeps: 2-2.4x faster, and exact
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(system);
-  if (solver.info() != Eigen::Success) throw std::runtime_error("cloth: the implicit system is not positive definite");
-  Eigen::VectorXd dv = scale.asDiagonal() * solver.solve(rhs);
+  for (int col = 0; col < system.outerSize(); ++col) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(system, col); it; ++it) it.valueRef() *= scale[it.row()] * scale[col];
+  }
+  // conjugate gradients (Jacobi-preconditioned), started from the last step's solution
+  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper> cg;
+  cg.setTolerance(tolerance_);
+  cg.setMaxIterations(kMaxSolverIterations);
+  cg.compute(system);
+  if (solver.guess.size() != rhs.size()) solver.guess = Eigen::VectorXd::Zero(rhs.size());
+  const Eigen::VectorXd z = cg.solveWithGuess(rhs, solver.guess);
+  solver.guess = z;
+  solver_iterations_ += cg.iterations();
+  Eigen::VectorXd dv = scale.asDiagonal() * z;
   // With no vertex pinned the exact dv changes the total momentum by exactly dt M g (the
   // internal forces sum to zero); the solver's residual need not, so its net part is removed
   if (free_count_ == n) {
@@ -416,7 +437,7 @@ void Cloth::project_strain(double dt) {
         at_vertex[e.j].push_back({a, 1.0});
       }
       // J W J^T: edges meeting at a free vertex k couple through w_k (s_a d_a) . (s_b d_b)
-      std::vector<cloth_detail::Triplet> triplets;
+      std::vector<Eigen::Triplet<double>> triplets;
       double largest = 0.0;
       for (int k = 0; k < n; ++k) {
         const double w = inverse_mass(k);
@@ -507,16 +528,14 @@ double Cloth::compute_stable_step() const {
 // Gershgorin row sum
 double Cloth::largest_omega2(bool stretch, bool bend) const {
   if (free_count_ == 0) return 0.0;
-  std::vector<cloth_detail::Triplet> triplets;
+  Eigen::SparseMatrix<double> H = pattern_->make_matrix();
   cloth_detail::Assembly what;
   what.stretch = stretch;
   what.bend = bend;
   what.hessian_weight = 1.0;
-  what.matrix_index = &free_index_;
-  what.triplets = &triplets;
+  what.pattern = pattern_.get();
+  what.matrix = &H;
   model_->assemble(x_, what);  // at rest the Hessian equals its material part
-  Eigen::SparseMatrix<double> H(3 * free_count_, 3 * free_count_);
-  H.setFromTriplets(triplets.begin(), triplets.end());
   Eigen::VectorXd inverse_sqrt_mass(3 * free_count_);
   for (int k = 0; k < vertex_count(); ++k) {
     if (free_index_[k] >= 0) inverse_sqrt_mass.segment<3>(3 * free_index_[k]).setConstant(1.0 / std::sqrt(mass_[k]));

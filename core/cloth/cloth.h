@@ -20,8 +20,27 @@
 namespace simbake {
 
 namespace cloth_detail {
-class ForceModel;  // cloth/cloth_forces.h: topology, rest state and element forces
+class ForceModel;     // cloth/cloth_forces.h: topology, rest state and element forces
+class MatrixPattern;  // cloth/cloth_forces.h: the implicit system's sparsity pattern
 }
+
+// Scratch memory of one object: a copy starts with none of its own (never shared)
+template <class T>
+class Scratch {
+ public:
+  Scratch() = default;
+  Scratch(const Scratch&) {}
+  Scratch& operator=(const Scratch&) { data_.reset(); return *this; }
+  Scratch(Scratch&&) = default;
+  Scratch& operator=(Scratch&&) = default;
+  T& get() {
+    if (!data_) data_ = std::make_shared<T>();
+    return *data_;
+  }
+
+ private:
+  std::shared_ptr<T> data_;
+};
 
 enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
@@ -46,6 +65,7 @@ struct ClothDesc {
   ClothMaterial material;
   std::vector<int> pinned;            // vertices held fixed
   ClothIntegrator integrator = ClothIntegrator::kImplicit;
+  double tolerance = 1e-4;            // implicit: the linear solve's relative residual (mass norm)
 };
 
 class Cloth {
@@ -78,12 +98,15 @@ class Cloth {
   const Points& velocities() const { return v_; }
   const ClothMaterial& material() const { return material_; }
   ClothIntegrator integrator() const { return integrator_; }
+  long long solver_iterations() const { return solver_iterations_; }  // implicit solves' CG iterations so far
 
  private:
   // (the helper implementing this class adds the private members it needs:
   //  edges and rest lengths, hinges and rest angles, triangle rest frames, solver scratch)
   ClothMaterial material_;
   ClothIntegrator integrator_;
+  double tolerance_;
+  long long solver_iterations_ = 0;
   Triangles triangles_;
   Eigen::VectorXd mass_;
   std::vector<char> pinned_;
@@ -92,6 +115,9 @@ class Cloth {
   // edges, hinges, membrane rest frames and the element forces; constant after
   // construction, so copies of a Cloth share it
   std::shared_ptr<const cloth_detail::ForceModel> model_;
+  std::shared_ptr<const cloth_detail::MatrixPattern> pattern_;
+  struct ImplicitSolver;  // cloth.cpp: the system matrix and its factorization
+  Scratch<ImplicitSolver> solver_;
   std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
   int free_count_ = 0;
   double stable_step_ = 0.0;     // stable_explicit_step(), computed once

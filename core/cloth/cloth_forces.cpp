@@ -99,11 +99,12 @@ Mat32 edge_matrix(const Vec3& x0, const Vec3& x1, const Vec3& x2) {
 
 // ---- assembly helpers
 
-// Adds one element's force (and damping / implicit terms) and matrix blocks
+// Adds one element's force (and damping / implicit terms) and matrix blocks; `slots` are
+// the element's block slots in the pattern (MatrixPattern)
 template <int N>
 void scatter(const int (&v)[N], const Eigen::Matrix<double, 3 * N, 1>& gradient,
              const Eigen::Matrix<double, 3 * N, 3 * N>& hessian, const Eigen::Matrix<double, 3 * N, 3 * N>& material,
-             const Assembly& what) {
+             const int* slots, const Assembly& what) {
   using VecN = Eigen::Matrix<double, 3 * N, 1>;
   using MatN = Eigen::Matrix<double, 3 * N, 3 * N>;
   if (what.force != nullptr) {
@@ -115,19 +116,18 @@ void scatter(const int (&v)[N], const Eigen::Matrix<double, 3 * N, 1>& gradient,
     }
     for (int a = 0; a < N; ++a) what.force->template segment<3>(3 * v[a]) += f.template segment<3>(3 * a);
   }
-  if (what.triplets != nullptr && (what.hessian_weight != 0.0 || what.material_weight != 0.0)) {
+  if (what.matrix != nullptr && (what.hessian_weight != 0.0 || what.material_weight != 0.0)) {
     const MatN m = what.hessian_weight * hessian + what.material_weight * material;
-    int index[N];
-    for (int a = 0; a < N; ++a) index[a] = what.matrix_index != nullptr ? (*what.matrix_index)[v[a]] : v[a];
+    const std::vector<int>& index = what.pattern->matrix_index();
+    const int* outer = what.matrix->outerIndexPtr();
+    double* values = what.matrix->valuePtr();
     for (int a = 0; a < N; ++a) {
-      if (index[a] < 0) continue;
       for (int b = 0; b < N; ++b) {
-        if (index[b] < 0) continue;
-        for (int r = 0; r < 3; ++r) {
-          for (int c = 0; c < 3; ++c) {
-            const double value = m(3 * a + r, 3 * b + c);
-            if (value != 0.0) what.triplets->emplace_back(3 * index[a] + r, 3 * index[b] + c, value);
-          }
+        const int slot = slots[N * a + b];
+        if (slot < 0) continue;
+        for (int c = 0; c < 3; ++c) {
+          double* column = values + outer[3 * index[v[b]] + c] + slot;
+          for (int r = 0; r < 3; ++r) column[r] += m(3 * a + r, 3 * b + c);
         }
       }
     }
@@ -390,7 +390,7 @@ double ForceModel::bend_energy(const Points& x) const {
 }
 
 void ForceModel::assemble(const Points& x, const Assembly& what) const {
-  const bool matrix = what.triplets != nullptr;
+  const bool matrix = what.matrix != nullptr;
   const bool velocity_terms = what.force != nullptr && what.velocity != nullptr;
   // which Hessians are needed at all
   const bool need_hessian = matrix && what.hessian_weight != 0.0;
@@ -406,7 +406,7 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
       spring_terms(row(x, e.i), row(x, e.j), e.rest, e.stiffness, compress_scale_, &gradient,
                    need_hessian ? &hessian : nullptr, need_material ? &material : nullptr);
       const int v[2] = {e.i, e.j};
-      scatter<2>(v, gradient, hessian, material, what);
+      scatter<2>(v, gradient, hessian, material, matrix ? what.pattern->edge_slots(&e - edges_.data()) : nullptr, what);
     }
   } else {
     // in-plane: StVK membrane per triangle, its Hessian projected to PSD
@@ -416,7 +416,7 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
       membrane_terms(row(x, m.v[0]), row(x, m.v[1]), row(x, m.v[2]), m.rest, lame_, compress_scale_, &gradient,
                      need_hessian ? &hessian : nullptr, need_material ? &material : nullptr);
       if (need_hessian) hessian = project_psd(hessian);
-      scatter<3>(m.v, gradient, hessian, material, what);
+      scatter<3>(m.v, gradient, hessian, material, matrix ? what.pattern->membrane_slots(&m - membranes_.data()) : nullptr, what);
     }
   }
 
@@ -430,8 +430,72 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
     const double d = angle_difference(dihedral_angle(p0, p1, p2, p3), h.rest_angle);
     const Vec12 grad_theta = dihedral_angle_gradient(p0, p1, p2, p3);
     if (need_gauss_newton) gauss_newton = k * grad_theta * grad_theta.transpose();
-    scatter<4>(h.v, Vec12(k * d * grad_theta), gauss_newton, gauss_newton, what);
+    scatter<4>(h.v, Vec12(k * d * grad_theta), gauss_newton, gauss_newton,
+               matrix ? what.pattern->hinge_slots(&h - hinges_.data()) : nullptr, what);
   }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The matrix pattern
+
+MatrixPattern::MatrixPattern(const ForceModel& model, const std::vector<int>& matrix_index) : index_(matrix_index) {
+  // every element's vertex pairs, as blocks
+  std::vector<Eigen::Triplet<double>> blocks;
+  auto add = [&](const int* v, int n) {
+    for (int a = 0; a < n; ++a) {
+      for (int b = 0; b < n; ++b) {
+        if (index_[v[a]] >= 0 && index_[v[b]] >= 0) blocks.emplace_back(index_[v[a]], index_[v[b]], 1.0);
+      }
+    }
+  };
+  for (const Edge& e : model.edges()) {
+    const int v[2] = {e.i, e.j};
+    add(v, 2);
+  }
+  for (const MembraneElement& m : model.membranes()) add(m.v, 3);
+  for (const Hinge& h : model.hinges()) add(h.v, 4);
+  int size = 0;
+  for (int i : index_) size = std::max(size, i + 1);
+  Eigen::SparseMatrix<double> block_pattern(size, size);
+  block_pattern.setFromTriplets(blocks.begin(), blocks.end());
+  // the scalar pattern: each block a dense 3x3; a block's first row sits at 3 x its rank
+  // among its block column's nonzero blocks, in each of the three columns alike
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(9 * block_pattern.nonZeros());
+  for (int b = 0; b < block_pattern.outerSize(); ++b) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(block_pattern, b); it; ++it) {
+      for (int c = 0; c < 3; ++c) {
+        for (int r = 0; r < 3; ++r) entries.emplace_back(3 * it.row() + r, 3 * b + c, 0.0);
+      }
+    }
+  }
+  pattern_.resize(3 * size, 3 * size);
+  pattern_.setFromTriplets(entries.begin(), entries.end());
+  auto slot = [&](int a, int b) {  // vertex indices
+    const int ia = index_[a], ib = index_[b];
+    if (ia < 0 || ib < 0) return -1;
+    const int* outer = block_pattern.outerIndexPtr();
+    const int* rows = block_pattern.innerIndexPtr();
+    const int* found = std::lower_bound(rows + outer[ib], rows + outer[ib + 1], ia);
+    return 3 * static_cast<int>(found - (rows + outer[ib]));
+  };
+  auto slots = [&](const int* v, int n, std::vector<int>& out) {
+    for (int a = 0; a < n; ++a) {
+      for (int b = 0; b < n; ++b) out.push_back(slot(v[a], v[b]));
+    }
+  };
+  for (const Edge& e : model.edges()) {
+    const int v[2] = {e.i, e.j};
+    slots(v, 2, edge_slots_);
+  }
+  for (const MembraneElement& m : model.membranes()) slots(m.v, 3, membrane_slots_);
+  for (const Hinge& h : model.hinges()) slots(h.v, 4, hinge_slots_);
+}
+
+Eigen::SparseMatrix<double> MatrixPattern::make_matrix() const {
+  Eigen::SparseMatrix<double> m = pattern_;
+  m.coeffs().setZero();
+  return m;
 }
 
 }  // namespace simbake::cloth_detail

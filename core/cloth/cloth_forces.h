@@ -24,7 +24,6 @@ using Vec9 = Eigen::Matrix<double, 9, 1>;
 using Mat9 = Eigen::Matrix<double, 9, 9>;
 using Vec12 = Eigen::Matrix<double, 12, 1>;
 using Mat12 = Eigen::Matrix<double, 12, 12>;
-using Triplet = Eigen::Triplet<double>;
 
 // ---- springs: W = 1/2 s E (|A| - 1)^2 L, A = (x_j - x_i) / L, s = compress_scale when |A| < 1
 
@@ -86,6 +85,31 @@ struct MembraneElement {
   MembraneRest rest;
 };
 
+class ForceModel;
+
+// The fixed sparsity pattern of a cloth's system matrix: 3x3 blocks for every pair of
+// vertices that share an element (spring, triangle or hinge), over the vertices in the matrix
+// (vertex -> block index, -1 for vertices left out: pinned). Built once per cloth, so that
+// each substep writes straight into a matrix's values (no triplets to sort) and a direct
+// solver can keep its symbolic analysis.
+class MatrixPattern {
+ public:
+  MatrixPattern(const ForceModel& model, const std::vector<int>& matrix_index);
+  // a zero matrix with the pattern (full symmetric storage, column-major)
+  Eigen::SparseMatrix<double> make_matrix() const;
+  // slots of element e's N x N blocks, row-major over its local vertices: the position of
+  // the block's first row inside each of its three columns, -1 if either vertex is left out
+  const int* edge_slots(size_t e) const { return &edge_slots_[4 * e]; }
+  const int* membrane_slots(size_t e) const { return &membrane_slots_[9 * e]; }
+  const int* hinge_slots(size_t e) const { return &hinge_slots_[16 * e]; }
+  const std::vector<int>& matrix_index() const { return index_; }
+
+ private:
+  std::vector<int> index_;
+  Eigen::SparseMatrix<double> pattern_;
+  std::vector<int> edge_slots_, membrane_slots_, hinge_slots_;
+};
+
 // What to assemble at positions x. Every output is optional (null: skipped).
 struct Assembly {
   bool stretch = true, bend = true;  // which elements take part
@@ -94,11 +118,10 @@ struct Assembly {
   double damping = 0.0;              // force += -damping * H_material v (Rayleigh, stiffness-proportional)
   double hessian_weight = 0.0;       // matrix += hessian_weight * H (clamped, PSD)
   double material_weight = 0.0;      // matrix += material_weight * H_material
-  // vertex -> index of its 3 rows in the matrix, or -1 to leave the vertex out of the
-  // matrix (pinned); empty: every vertex, in order
-  const std::vector<int>* matrix_index = nullptr;
   Eigen::VectorXd* force = nullptr;  // (3n) += internal forces
-  std::vector<Triplet>* triplets = nullptr;
+  // matrix += the weighted Hessians, into a matrix made by pattern->make_matrix()
+  const MatrixPattern* pattern = nullptr;
+  Eigen::SparseMatrix<double>* matrix = nullptr;
 };
 
 // Topology, rest state and material of a cloth: constant once built

@@ -30,6 +30,7 @@ int World::add_cloth(const ClothDesc& desc, double friction, double thickness) {
 }
 
 void World::step_cloths(double dt) {
+  if (!cloths_.empty()) ++stats_.cloth_steps;
   for (int c = 0; c < cloth_count(); ++c) {
     cloths_[c].update_velocities(dt, settings_.gravity);
     collide_cloth(c, dt);

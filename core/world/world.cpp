@@ -151,6 +151,35 @@ void World::move_kinematic_bodies(double dt) {
 }
 
 int World::automatic_substeps(double frame_dt) const {
+  // a whole number of substeps per cloth step
+  const double steps = automatic_rigid_substeps(frame_dt);
+  const double cloth_steps = automatic_cloth_steps(frame_dt);
+  return static_cast<int>(std::min(cloth_steps * std::ceil(steps / cloth_steps), double(settings_.max_substeps)));
+}
+
+bool World::dynamic_body_near_cloth(double frame_dt) const {
+  // the cloths' box over the frame against each awake dynamic body's bounding sphere over it
+  Box3 reach;
+  double reach_speed = 0.0;
+  for (size_t c = 0; c < cloths_.size(); ++c) {
+    const Points& x = cloths_[c].positions();
+    for (Eigen::Index k = 0; k < x.rows(); ++k) reach.extend(Vec3(x.row(k).transpose()));
+    for (Eigen::Index k = 0; k < x.rows(); ++k) reach_speed = std::max(reach_speed, cloths_[c].velocities().row(k).norm());
+    reach_speed = std::max(reach_speed, cloth_thickness_[c] / frame_dt);
+  }
+  const double g = settings_.gravity.norm() * frame_dt;
+  for (int i = 0; i < body_count(); ++i) {
+    if (defs_[i].kinematic || asleep_[i]) continue;
+    const Vec3 omega = angular_velocity(defs_[i], states_[i]);
+    const double speed = states_[i].v.norm() + omega.norm() * defs_[i].bounding_radius + g;
+    const double radius = defs_[i].bounding_radius + (speed + reach_speed + g) * frame_dt;
+    const Vec3 nearest = states_[i].x.cwiseMax(reach.min()).cwiseMin(reach.max());
+    if ((nearest - states_[i].x).norm() <= radius) return true;
+  }
+  return false;
+}
+
+int World::automatic_rigid_substeps(double frame_dt) const {
   // Each body may travel a fraction of its thickness per substep (no tunnelling through its
   // own thinnest part), nor more than twice that fraction of the scene's thinnest body (no
   // tunnelling through a thin post or plate); its speed over the frame is bounded by the
@@ -175,8 +204,21 @@ int World::automatic_substeps(double frame_dt) const {
     const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
     steps = std::max(steps, std::ceil(speed * frame_dt / limit));
   }
-  // cloth: the explicit integrator's speed-of-sound limit, and no vertex crossing more than
-  // the travel fraction of the thinnest body in a substep
+  if (!std::isfinite(steps)) return settings_.max_substeps;
+  return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
+}
+
+int World::automatic_cloth_steps(double frame_dt) const {
+  // the cloth's own ceiling, the explicit integrator's speed-of-sound limit, and no vertex
+  // crossing more than the travel fraction of the thinnest body in a step. A cloth that a
+  // dynamic body may touch within the frame steps with the bodies, every substep: its push
+  // on the body is the momentum its vertices lose in contact, which is too little, at
+  // coarse steps, to hold a heavy body (a ball falls through a hammock at 1/60 s)
+  if (cloths_.empty()) return 1;
+  double steps = std::ceil(frame_dt / settings_.cloth_max_substep);
+  if (dynamic_body_near_cloth(frame_dt)) steps = automatic_rigid_substeps(frame_dt);
+  double thinnest = std::numeric_limits<double>::infinity();
+  for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);
   for (const Cloth& cloth : cloths_) {
     if (cloth.integrator() == ClothIntegrator::kExplicit) {
       steps = std::max(steps, std::ceil(frame_dt / cloth.stable_explicit_step()));
@@ -195,10 +237,18 @@ int World::step_frame(double frame_dt, int substeps) {
   require(frame_dt > 0.0 && std::isfinite(frame_dt), "frame_dt must be > 0");
   const int n = std::min(substeps > 0 ? substeps : automatic_substeps(frame_dt), settings_.max_substeps);
   const double dt = frame_dt / n;
+  // the cloths step once every `group` substeps, over the group's time (a fixed substep
+  // count steps them every substep)
+  const int cloth_steps = substeps > 0 ? n : std::min(automatic_cloth_steps(frame_dt), n);
+  const int group = n % cloth_steps == 0 ? n / cloth_steps : 1;
   tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
   arena.execute([&] {
     for (int k = 0; k < n && stats_.finite; ++k) {
-      step(dt);
+      step_bodies(dt);
+      if ((k + 1) % group == 0) {
+        ScopedTimer timer(profile_.cloths);
+        step_cloths(group * dt);
+      }
       // a NaN is caught at once and reported, never stepped on
       if (!check_finite()) stats_.finite = false;
     }
@@ -211,6 +261,12 @@ int World::step_frame(double frame_dt, int substeps) {
 }
 
 void World::step(double dt) {
+  step_bodies(dt);
+  ScopedTimer timer(profile_.cloths);
+  step_cloths(dt);
+}
+
+void World::step_bodies(double dt) {
   dt_ = dt;
   { ScopedTimer timer(profile_.broad_phase); move_kinematic_bodies(dt); broad_phase(dt); }
   { ScopedTimer timer(profile_.collisions); resolve_collisions(dt); }
@@ -219,7 +275,6 @@ void World::step(double dt) {
   { ScopedTimer timer(profile_.shock_propagation); propagate_shocks(); }
   { ScopedTimer timer(profile_.positions); update_positions(dt); }
   { ScopedTimer timer(profile_.sleeping); update_sleeping(dt); }
-  { ScopedTimer timer(profile_.cloths); step_cloths(dt); }
   time_ += dt;
   ++stats_.substeps;
 }

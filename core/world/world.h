@@ -17,7 +17,9 @@
 //   step_cloths        per cloth: internal forces and velocity update, collisions with every
 //                      body's level set and the ground (thickness, Coulomb friction on the
 //                      relative velocity, equal and opposite impulses on dynamic bodies),
-//                      strain limiting and compression impulses, collisions again, positions
+//                      strain limiting and compression impulses, collisions again, positions.
+//                      Within a frame the cloths step at their own rate, once every few
+//                      substeps and over those substeps' time (see step_frame)
 // Statistics (energy, penetration, substeps) are gathered once per frame.
 #pragma once
 
@@ -46,6 +48,8 @@ struct WorldSettings {
   double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
                                          // changes a point velocity by more than this
   double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
+  double cloth_max_substep = 1.0 / 60.0; // (s) longest automatic cloth step: cloths step at
+                                         // their own, coarser rate (every few substeps)
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
                                          // more than this fraction of its thickness
   int max_substeps = 4096;               // per frame, automatic or not
@@ -77,6 +81,7 @@ struct BodyDesc {
 
 struct StepStatistics {
   long long substeps = 0;          // substeps taken since the world was built
+  long long cloth_steps = 0;       // cloth steps taken since the world was built
   double max_penetration = 0.0;    // deepest sample inside another body or the ground (m), last frame
   double kinetic_energy = 0.0;     // (J), now, bodies and cloths
   double elastic_energy = 0.0;     // cloths' stretch and bending energy (J), now
@@ -121,10 +126,12 @@ class World {
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
   // substeps == 0; returns the number of substeps taken
   int step_frame(double frame_dt, int substeps = 0);
-  // One substep: the stages in order
+  // One substep: the stages in order, the cloths stepped with the bodies
   void step(double dt);
-  // Substeps the automatic rule picks for the next frame
+  // Substeps the automatic rule picks for the next frame (a multiple of the cloth steps)
   int automatic_substeps(double frame_dt) const;
+  // Cloth steps the automatic rule picks for the next frame (1 with no cloth)
+  int automatic_cloth_steps(double frame_dt) const;
 
   int body_count() const { return static_cast<int>(defs_.size()); }
   const RigidBodyDef& body_def(int i) const { return defs_[i]; }
@@ -166,6 +173,11 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
+  // one substep of the rigid bodies (every stage but step_cloths)
+  void step_bodies(double dt);
+  // the substeps the bodies alone need; whether a dynamic body may touch a cloth this frame
+  int automatic_rigid_substeps(double frame_dt) const;
+  bool dynamic_body_near_cloth(double frame_dt) const;
   // stages
   void move_kinematic_bodies(double dt);
   void broad_phase(double dt);

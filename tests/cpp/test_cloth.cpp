@@ -60,13 +60,15 @@ Eigen::VectorXd forces(const ForceModel& model, const Points& x) {
 }
 
 Eigen::MatrixXd hessian(const ForceModel& model, const Points& x) {
-  std::vector<Triplet> triplets;
+  std::vector<int> every_vertex(x.rows());
+  for (int k = 0; k < x.rows(); ++k) every_vertex[k] = k;
+  const MatrixPattern pattern(model, every_vertex);
+  Eigen::SparseMatrix<double> H = pattern.make_matrix();
   Assembly what;
   what.hessian_weight = 1.0;
-  what.triplets = &triplets;
+  what.pattern = &pattern;
+  what.matrix = &H;
   model.assemble(x, what);
-  Eigen::SparseMatrix<double> H(3 * x.rows(), 3 * x.rows());
-  H.setFromTriplets(triplets.begin(), triplets.end());
   return Eigen::MatrixXd(H);
 }
 
