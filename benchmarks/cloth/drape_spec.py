@@ -28,8 +28,8 @@ SPHERE_CENTER = (0.0, 0.5, 0.0)
 GROUND = 0.0
 GRAVITY = 9.81
 AREA_DENSITY = 0.1            # kg/m^2
-STRETCH = 2000.0              # simbake's spring E (N): W = 1/2 E (|A|-1)^2 L; for springs this is
-                              # a membrane of Young's modulus x thickness about E/2... (see README)
+STRETCH = 2000.0              # the sheet's stiffness, Young's modulus x thickness (N/m): a grid
+                              # pulled along an axis resists with this (simbake's springs and membrane)
 BEND = 1e-4                   # N m
 THICKNESS = 0.005             # m, the collision distance
 FRICTION = 0.4                # cloth against sphere and ground (simbake combines sqrt(mu_a mu_b))

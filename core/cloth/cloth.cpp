@@ -8,10 +8,11 @@
 //        W = 1/2 E (|A| - 1)^2 L,     f_j = -E (|x_j - x_i| / L - 1) d = -f_i,
 //    d the unit edge direction: a spring of constant k = E / L. E (N, force per unit
 //    strain) is not the user's number: stretch_stiffness is the sheet's stiffness Y (N/m,
-//    as for the membrane) and each edge gets E = Y a / L, a its share of the rest area (a
-//    third of each of its triangles), i.e. the width of sheet it stands for. A refined mesh
-//    is then the same sheet (a regular right-triangle grid pulled along an axis resists
-//    with 5/12 Y: 1/3 from the sides, 1/12 from the diagonals, at every resolution).
+//    as for the membrane) and each edge gets E = 12/5 Y a / L, a its share of the rest area
+//    (a third of each of its triangles), i.e. the width of sheet it stands for. A refined
+//    mesh is then the same sheet, and a regular right-triangle grid pulled along an axis
+//    resists with exactly Y (its sides give 1/3 and its diagonals 1/12 of Y a / L's
+//    stiffness: 5/12); an equilateral mesh gives 0.8 Y in every direction.
 //  * membrane (the notes, "Elastic Surfaces" to "Surface elasticity"): each triangle is a
 //    linear element; its rest shape is laid out in its own 2D frame (Dm, 2x2) so that the
 //    deformation gradient F = Ds Dm^-1 is 3x2 (Ds = [x1 - x0, x2 - x0]), the Green strain

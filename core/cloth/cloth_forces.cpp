@@ -303,6 +303,11 @@ double angle_difference(double theta, double theta0) {
 // ---------------------------------------------------------------------------------------------
 // The whole cloth
 
+// Springs: E = 12/5 Y a / L, so that a regular right-triangle grid pulled along an axis
+// resists with exactly Y (its sides give 5/12 of the unscaled stiffness: 1/3 from the sides
+// and 1/12 from the diagonals); an equilateral mesh then gives 0.8 Y, isotropically
+constexpr double kSpringCalibration = 12.0 / 5.0;
+
 ForceModel::ForceModel(const Points& rest, const Triangles& triangles, const ClothMaterial& material)
     : material_(material),
       lame_(lame_parameters(material.stretch_stiffness, material.poisson_ratio)),
@@ -336,7 +341,7 @@ ForceModel::ForceModel(const Points& rest, const Triangles& triangles, const Clo
     Edge edge{first.a, first.b, (row(rest, first.b) - row(rest, first.a)).norm()};
     double share = 0.0;  // a third of each adjacent triangle's rest area
     for (size_t t = s; t < end; ++t) share += area(sides[t].triangle) / 3.0;
-    edge.stiffness = edge.rest > 0.0 ? material.stretch_stiffness * share / edge.rest : 0.0;
+    edge.stiffness = edge.rest > 0.0 ? kSpringCalibration * material.stretch_stiffness * share / edge.rest : 0.0;
     edges_.push_back(edge);
     if (end - s == 2) {
       const Side& second = sides[s + 1];

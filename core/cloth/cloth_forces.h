@@ -71,9 +71,9 @@ double angle_difference(double theta, double theta0);
 struct Edge {
   int i = 0, j = 0;        // i < j
   double rest = 0.0;       // rest length (m)
-  double stiffness = 0.0;  // the spring's E (N): the sheet's stretch_stiffness (N/m) x the
-                           // edge's share of the rest area (a third of each of its triangles)
-                           // / its rest length, so a refined mesh is the same sheet
+  double stiffness = 0.0;  // the spring's E (N): 12/5 x the sheet's stretch_stiffness (N/m)
+                           // x the edge's share of the rest area (a third of each of its
+                           // triangles) / its rest length, so a refined mesh is the same sheet
 };
 struct Hinge {
   int v[4] = {0, 0, 0, 0};  // see the local order at the top of this file
