@@ -65,7 +65,7 @@ struct ClothDesc {
   ClothMaterial material;
   std::vector<int> pinned;            // vertices held fixed
   ClothIntegrator integrator = ClothIntegrator::kImplicit;
-  double tolerance = 1e-4;            // implicit: the linear solve's relative residual (mass norm)
+  double tolerance = 1e-3;            // implicit: the linear solve's relative residual (mass norm)
 };
 
 class Cloth {

@@ -180,12 +180,20 @@ bool World::dynamic_body_near_cloth(double frame_dt) const {
 }
 
 int World::automatic_rigid_substeps(double frame_dt) const {
+  // the ceiling applies where bodies interact: with no dynamic body, kinematic bodies need
+  // only as many steps as their travel (and the cloths) ask for
+  const bool dynamic = std::any_of(defs_.begin(), defs_.end(), [](const RigidBodyDef& d) { return !d.kinematic; });
+  const double steps = std::max(dynamic ? std::ceil(frame_dt / settings_.max_substep) : 1.0, body_travel_steps(frame_dt));
+  if (!std::isfinite(steps)) return settings_.max_substeps;
+  return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
+}
+
+double World::body_travel_steps(double frame_dt) const {
   // Each body may travel a fraction of its thickness per substep (no tunnelling through its
   // own thinnest part), nor more than twice that fraction of the scene's thinnest body (no
   // tunnelling through a thin post or plate); its speed over the frame is bounded by the
   // current speed of its fastest point plus what gravity adds in one frame.
-  double steps = std::ceil(frame_dt / settings_.max_substep);
-  // no body may pass through the thinnest body of the scene either
+  double steps = 1.0;
   double thinnest = std::numeric_limits<double>::infinity();
   for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);
   for (int i = 0; i < body_count(); ++i) {
@@ -204,8 +212,7 @@ int World::automatic_rigid_substeps(double frame_dt) const {
     const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
     steps = std::max(steps, std::ceil(speed * frame_dt / limit));
   }
-  if (!std::isfinite(steps)) return settings_.max_substeps;
-  return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
+  return steps;
 }
 
 int World::automatic_cloth_steps(double frame_dt) const {
@@ -215,7 +222,8 @@ int World::automatic_cloth_steps(double frame_dt) const {
   // on the body is the momentum its vertices lose in contact, which is too little, at
   // coarse steps, to hold a heavy body (a ball falls through a hammock at 1/60 s)
   if (cloths_.empty()) return 1;
-  double steps = std::ceil(frame_dt / settings_.cloth_max_substep);
+  // bodies (a keyed collider, say) may not cross more of themselves than in a substep either
+  double steps = std::max(std::ceil(frame_dt / settings_.cloth_max_substep), body_travel_steps(frame_dt));
   if (dynamic_body_near_cloth(frame_dt)) steps = automatic_rigid_substeps(frame_dt);
   double thinnest = std::numeric_limits<double>::infinity();
   for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);

@@ -177,6 +177,7 @@ class World {
   void step_bodies(double dt);
   // the substeps the bodies alone need; whether a dynamic body may touch a cloth this frame
   int automatic_rigid_substeps(double frame_dt) const;
+  double body_travel_steps(double frame_dt) const;  // steps that keep each body's travel short
   bool dynamic_body_near_cloth(double frame_dt) const;
   // stages
   void move_kinematic_bodies(double dt);
