@@ -36,7 +36,7 @@ FRICTION = 0.4                # cloth against sphere and ground (simbake combine
 FPS = 24
 SECONDS = 3.0
 FRAMES = int(round(SECONDS * FPS))
-SHAPE_TIMES = (1.0, 3.0)      # s
+SHAPE_TIMES = (0.5, 1.0, 3.0) # s
 COMMON = 17                   # common material points a side
 RESOLUTIONS = (17, 33, 65, 129, 257)
 

@@ -621,6 +621,15 @@ double Cloth::max_strain() const {
   return strain;
 }
 
+double Cloth::candidate_strain(double dt) const {
+  double strain = 0.0;
+  for (const cloth_detail::Edge& e : model_->edges()) {
+    const Vec3 d = row(x_, e.j) + dt * row(v_, e.j) - row(x_, e.i) - dt * row(v_, e.i);
+    strain = std::max(strain, d.norm() / e.rest - 1.0);
+  }
+  return strain;
+}
+
 Points Cloth::vertex_normals() const {
   TriangleMesh mesh;
   mesh.vertices = x_;

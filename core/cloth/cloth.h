@@ -83,8 +83,9 @@ class Cloth {
   double elastic_energy() const;
   double kinetic_energy() const;
   double potential_energy(const Vec3& gravity) const;
-  // largest edge strain |l| / L - 1 now
+  // largest edge strain |l| / L - 1 now, and at the candidate positions x + dt v
   double max_strain() const;
+  double candidate_strain(double dt) const;
   // area-weighted vertex normals of the current shape (n x 3)
   Points vertex_normals() const;
 

@@ -20,6 +20,11 @@
 
 namespace simbake {
 
+namespace {
+constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
+constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+}  // namespace
+
 int World::add_cloth(const ClothDesc& desc, double friction, double thickness) {
   if (!(friction >= 0.0 && std::isfinite(friction))) throw std::invalid_argument("cloth friction must be >= 0");
   if (!(thickness >= 0.0 && std::isfinite(thickness))) throw std::invalid_argument("cloth thickness must be >= 0");
@@ -32,11 +37,18 @@ int World::add_cloth(const ClothDesc& desc, double friction, double thickness) {
 void World::step_cloths(double dt) {
   if (!cloths_.empty()) ++stats_.cloth_steps;
   for (int c = 0; c < cloth_count(); ++c) {
-    cloths_[c].update_velocities(dt, settings_.gravity);
+    Cloth& cloth = cloths_[c];
+    cloth.update_velocities(dt, settings_.gravity);
     collide_cloth(c, dt);
-    cloths_[c].limit_strain(dt);
-    collide_cloth(c, dt);
-    cloths_[c].update_positions(dt);
+    // strain limiting and collisions in turn: a collision can stretch an edge the limiter
+    // just fixed, most of all at long steps; collisions have the last word
+    const double limit = cloth.material().strain_limit;
+    for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
+      cloth.limit_strain(dt);
+      collide_cloth(c, dt);
+      if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack)) break;
+    }
+    cloth.update_positions(dt);
   }
 }
 
