@@ -6,12 +6,14 @@ side with Blender's cloth modifier, Newton's VBD (CPU) and MuJoCo's flex.
     python3 benchmarks/cloth/compare.py --quick      # resolutions 17 and 33 only
     python3 benchmarks/cloth/compare.py --engines simbake --fresh
     python3 benchmarks/cloth/compare.py --report     # tables and plots from the saved runs
+    taskset -c 0 python3 benchmarks/cloth/compare.py --engines simbake --resolutions 17 33 65 &
+    taskset -c 1 python3 benchmarks/cloth/compare.py --engines simbake --resolutions 129 257 --suffix _big
 
 Each run is one subprocess of the engine's runner (simbake: .venv; Blender, Newton and MuJoCo:
 the venvs of benchmarks/peers, see its README), pinned to one CPU with the thread variables
 at 1, timed by the runner over its stepping alone (wall and CPU seconds). Runs are saved as
-they finish in benchmarks/results/cloth_runs.json (a rerun skips those already there unless
---fresh), then compared:
+they finish in benchmarks/results/cloth_runs_<engine>[suffix].json (a rerun skips those
+already there unless --fresh; every such file is read), then compared:
 - strain: the largest edge strain over the run (the sheet is 2000 N/m under ~1 N/m of
   weight: a converged answer is under 1 %; simbake also limits it to 10 %);
 - penetration: the deepest vertex inside the sphere or the ground;
@@ -42,7 +44,6 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 PEERS = HERE.parent / "peers"
 RESULTS = ROOT / "benchmarks" / "results"
-RUNS = RESULTS / "cloth_runs.json"
 sys.path.insert(0, str(HERE))
 import drape_spec as spec  # noqa: E402
 
@@ -275,10 +276,19 @@ def main() -> None:
     parser.add_argument("--fresh", action="store_true", help="rerun runs already saved")
     parser.add_argument("--report", action="store_true", help="no runs: report the saved ones")
     parser.add_argument("--timeout", type=float, default=1800.0, help="per run (s)")
+    parser.add_argument("--resolutions", type=int, nargs="+", help="only the runs at these resolutions")
+    parser.add_argument("--suffix", default="", help="save to cloth_runs_<engine><suffix>.json (for drivers "
+                        "running at once, e.g. pinned to different CPUs)")
     args = parser.parse_args()
     RESULTS.mkdir(parents=True, exist_ok=True)
-    runs = json.loads(RUNS.read_text()) if RUNS.exists() else {}
-    plan = [r for r in (QUICK if args.quick else RUNS_FULL) if r[0] in args.engines]
+    # each engine's runs in a file of its own (drivers for different engines may run at once)
+    def runs_file(engine: str) -> Path:
+        return RESULTS / f"cloth_runs_{engine}{args.suffix}.json"
+    runs = {}
+    for path in sorted(RESULTS.glob("cloth_runs_*.json")):
+        runs.update(json.loads(path.read_text()))
+    plan = [r for r in (QUICK if args.quick else RUNS_FULL)
+            if r[0] in args.engines and (not args.resolutions or r[1] in args.resolutions)]
     if not args.report:
         for engine, n, extra, label in plan:
             key = run_key(engine, n, extra)
@@ -288,7 +298,7 @@ def main() -> None:
             out = run_once(engine, n, extra, args.timeout)
             out.update({"engine_name": engine, "n": n, "label": label})
             runs[key] = out
-            RUNS.write_text(json.dumps(runs))
+            runs_file(engine).write_text(json.dumps({k: r for k, r in runs.items() if r["engine_name"] == engine}))
             print(out.get("error") or f"{cpu_per_sim_second(out):.3g} CPU s/s, strain {out['max_strain']:.3f}")
     payload = {"machine": machine_info(), "git": git_state(), "rows": summarize(runs)}
     (RESULTS / "cloth.json").write_text(json.dumps(payload, indent=1))

@@ -292,8 +292,12 @@ def write_markdown(results: dict, path: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("axes", nargs="*", choices=list(AXES), default=list(AXES))
+    parser.add_argument("axes", nargs="*", help=f"some of {', '.join(AXES)} (default: all)")
     args = parser.parse_args()
+    unknown = [a for a in args.axes if a not in AXES]
+    if unknown:
+        parser.error(f"unknown axes {unknown}; choose from {list(AXES)}")
+    args.axes = args.axes or list(AXES)
     path = RESULTS / "cloth_stress.json"
     results = json.loads(path.read_text()) if path.exists() else {}
     for axis in args.axes:

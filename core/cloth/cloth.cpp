@@ -200,6 +200,11 @@ constexpr int kStrainSweeps = 8;            // Gauss-Seidel sweeps of the strain
 constexpr int kProjectionIterations = 10;   // most Newton iterations of the global pass
 constexpr int kActiveSetPasses = 8;         // most active-set updates per Newton iteration
 constexpr double kStrainTolerance = 1e-6;   // strain limiting is done when every edge is this close (x L)
+// The most an edge's length is corrected in one step, x the cloth's mean edge length. Far
+// more than any step of a free cloth needs; it bounds the velocity the limiter can give
+// where it fights a collision (cloth pushed by a keyed body against its own pins), which
+// would otherwise grow without bound
+constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
@@ -299,6 +304,9 @@ Cloth::Cloth(const ClothDesc& desc)
   for (size_t q = 0; q < forward_order_.size(); ++q) forward_order_[q] = static_cast<int>(q);
   backward_order_.assign(forward_order_.rbegin(), forward_order_.rend());
   stable_step_ = compute_stable_step();
+  double total_length = 0.0;
+  for (const cloth_detail::Edge& e : model_->edges()) total_length += e.rest;
+  max_correction_ = kMaxCorrection * total_length / static_cast<double>(model_->edges().size());
 }
 
 // ---- stage: forces and the velocity update
@@ -409,14 +417,15 @@ double Cloth::strain_sweep(double dt, const std::vector<int>& order) {
     const double target = strain_target(length, e.rest, limit, enforce);
     if (target < 0.0 || length <= 0.0) continue;
     worst = std::max(worst, std::abs(length - target) / e.rest);
-    const Vec3 change = ((length - target) / (dt * (wi + wj) * length)) * d;
+    const double excess = std::clamp(length - target, -max_correction_, max_correction_);
+    const Vec3 change = (excess / (dt * (wi + wj) * length)) * d;
     v_.row(e.i) += (wi * change).transpose();
     v_.row(e.j) -= (wj * change).transpose();
   }
   return worst;
 }
 
-void Cloth::limit_strain(double dt) {
+void Cloth::limit_strain(double dt, bool global) {
   require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
   if (material_.strain_limit <= 0.0 && material_.compression != CompressionMode::kEnforce) return;
   // Gauss-Seidel sweeps with the true masses, forward and backward in turn (momentum is
@@ -427,7 +436,7 @@ void Cloth::limit_strain(double dt) {
   // They converge slowly where a long chain of edges holds a load (a soft cloth hanging
   // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
   // 12 x 12 cloth can need hundreds of sweeps). The rest is solved for all edges at once.
-  project_strain(dt);
+  if (global) project_strain(dt);
 }
 
 // Strain limiting for all edges at once: Newton iterations on the candidate lengths (the
@@ -478,7 +487,7 @@ void Cloth::project_strain(double dt) {
         const cloth_detail::Edge& e = edges[active[a]];
         const Vec3 d = row(p, e.j) - row(p, e.i);
         if (length[active[a]] > 0.0) direction[a] = d / length[active[a]];
-        error[a] = length[active[a]] - target[active[a]];
+        error[a] = std::clamp(length[active[a]] - target[active[a]], -max_correction_, max_correction_);
         at_vertex[e.i].push_back({a, -1.0});
         at_vertex[e.j].push_back({a, 1.0});
       }

@@ -74,7 +74,7 @@ class Cloth {
 
   // stages (see the top of this file)
   void update_velocities(double dt, const Vec3& gravity);
-  void limit_strain(double dt);
+  void limit_strain(double dt, bool global = true);
   void update_positions(double dt);
 
   // the largest stable explicit substep (speed-of-sound limit) for the current material (s)
@@ -122,6 +122,7 @@ class Cloth {
   std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
   int free_count_ = 0;
   double stable_step_ = 0.0;     // stable_explicit_step(), computed once
+  double max_correction_ = 0.0;  // the strain limiter's largest length correction per step (m)
   std::vector<int> forward_order_, backward_order_;  // the strain limiter's sweep orders
 
   void explicit_velocities(double dt, const Vec3& gravity);

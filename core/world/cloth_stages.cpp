@@ -44,7 +44,7 @@ void World::step_cloths(double dt) {
     // just fixed, most of all at long steps; collisions have the last word
     const double limit = cloth.material().strain_limit;
     for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
-      cloth.limit_strain(dt);
+      cloth.limit_strain(dt, pass == 0);
       collide_cloth(c, dt);
       if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack)) break;
     }
