@@ -128,3 +128,47 @@ TEST(ClothWorld, ClothAndBodyExchangeMomentumEqually) {
   EXPECT_LT(world.body_state(0).v.y(), -0.1);  // the ball was pushed
   EXPECT_LT((momentum() - p0).norm(), 1e-6 * p0.norm());
 }
+
+// The step schedule: a cloth steps at its own ceiling (1/60 s: 3 steps a 1/24 s frame) and,
+// with no dynamic body in the scene, the bodies take no more substeps than that; a dynamic
+// body within reach of the cloth brings the cloth down to the bodies' substeps (1/240 s: 10);
+// a fast keyed collider adds steps so that it crosses no more than 0.2 of its thickness per
+// step (a 0.3 m ball at 30 m/s over a 1/24 s frame: 1.25 m / 0.06 m = 21 steps)
+TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
+  const double frame = 1.0 / 24.0;
+  {
+    World world;
+    BodyDesc ball = sphere_body(0.5, 1.0, Vec3(0.0, 0.5, 0.0));
+    ball.kinematic = true;
+    world.add_body(ball);
+    world.add_cloth(square_cloth(2.0, 9, Vec3(0.0, 1.2, 0.0)), 0.4, 0.005);
+    EXPECT_EQ(world.automatic_cloth_steps(frame), 3);
+    EXPECT_EQ(world.automatic_substeps(frame), 3);
+    world.step_frame(frame);
+    EXPECT_EQ(world.statistics().cloth_steps, 3);
+    EXPECT_EQ(world.statistics().substeps, 3);
+  }
+  {
+    World world;
+    world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 1.16, 0.0)));  // dynamic, 1 cm above the cloth
+    world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
+    EXPECT_EQ(world.automatic_cloth_steps(frame), 10);
+    EXPECT_EQ(world.automatic_substeps(frame), 10);
+  }
+  {
+    World world;
+    world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 30.0, 0.0)));  // dynamic, far away
+    world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
+    EXPECT_EQ(world.automatic_cloth_steps(frame), 3);
+    EXPECT_EQ(world.automatic_substeps(frame), 12);  // the bodies' 10, rounded up to a multiple of 3
+  }
+  {
+    World world;
+    BodyDesc ball = sphere_body(0.15, 1.0, Vec3(0.0, 1.0, -1.0));
+    ball.kinematic = true;
+    ball.linear_velocity = Vec3(0.0, 0.0, 30.0);
+    world.add_body(ball);
+    world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
+    EXPECT_EQ(world.automatic_cloth_steps(frame), 21);
+  }
+}
