@@ -32,10 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -98,23 +95,7 @@ def run_once(engine: str, n: int, extra: list, timeout: float) -> dict:
     python, script = ENGINES[engine]
     if not python.exists():
         return {"error": f"{python} not found (see benchmarks/peers/README.md)"}
-    cmd = [str(python), str(script), str(n), *extra]
-    cpu = pinned_cpu()
-    preexec = (lambda: os.sched_setaffinity(0, {cpu})) if cpu is not None else None
-    start = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=child_environment(), cwd=str(ROOT),
-                              timeout=timeout, preexec_fn=preexec)
-    except subprocess.TimeoutExpired:
-        return {"error": f"timed out after {timeout:.0f} s", "command": cmd[1:]}
-    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
-    if proc.returncode != 0 or not lines:
-        tail = (proc.stderr or proc.stdout).strip().splitlines()[-4:]
-        return {"error": f"exit {proc.returncode}: " + " | ".join(tail), "command": cmd[1:]}
-    out = json.loads(lines[-1])
-    out["process_wall_seconds"] = time.perf_counter() - start
-    out["command"] = cmd[1:]
-    return out
+    return _peers.run_pinned([str(python), str(script), str(n), *extra], timeout)
 
 
 # ---- measures

@@ -91,6 +91,11 @@ def run_once(engine: str, scene: str, seconds: float | None, extra_args: list, t
     if not python.exists():
         return {"error": f"{python} not found (create the venv: see benchmarks/peers/README.md)"}
     cmd = [str(python), str(script), scene] + (["--seconds", repr(seconds)] if seconds else []) + extra_args
+    return run_pinned(cmd, timeout)
+
+
+def run_pinned(cmd: list, timeout: float) -> dict:
+    """Runs one engine script pinned to one CPU; its last JSON line, or the error."""
     cpu = pinned_cpu()
     preexec = (lambda: os.sched_setaffinity(0, {cpu})) if cpu is not None else None
     start = time.perf_counter()
