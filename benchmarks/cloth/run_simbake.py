@@ -49,7 +49,7 @@ def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: s
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("n", type=int, help="vertices a side (16 k + 1)")
-    parser.add_argument("--cloth-step", type=float, default=1.0 / 60.0, help="cloth_max_substep (s)")
+    parser.add_argument("--cloth-step", type=float, default=1.0 / 120.0, help="cloth_max_substep (s)")
     parser.add_argument("--tolerance", type=float, default=1e-3, help="CG relative residual")
     parser.add_argument("--integrator", choices=("implicit", "explicit"), default="implicit")
     parser.add_argument("--model", choices=("springs", "membrane"), default="springs")

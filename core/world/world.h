@@ -48,7 +48,7 @@ struct WorldSettings {
   double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
                                          // changes a point velocity by more than this
   double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
-  double cloth_max_substep = 1.0 / 60.0; // (s) longest automatic cloth step: cloths step at
+  double cloth_max_substep = 1.0 / 120.0; // (s) longest automatic cloth step: cloths step at
                                          // their own, coarser rate (every few substeps)
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
                                          // more than this fraction of its thickness
