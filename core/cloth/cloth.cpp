@@ -385,9 +385,11 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
   // With no vertex pinned the exact dv changes the total momentum by exactly dt M g (the
   // internal forces sum to zero); the solver's residual need not, so its net part is removed
   if (free_count_ == n) {
-    Vec3 excess = -dt * mass_.sum() * gravity;
+    const double total_mass = mass_.sum();
+    Vec3 excess = -dt * total_mass * gravity;
     for (int k = 0; k < n; ++k) excess += mass_[k] * dv.segment<3>(3 * k);
-    for (int k = 0; k < n; ++k) dv.segment<3>(3 * k) -= excess / mass_.sum();
+    const Vec3 correction = excess / total_mass;
+    for (int k = 0; k < n; ++k) dv.segment<3>(3 * k) -= correction;
   }
   for (int k = 0; k < n; ++k) {
     const int i = free_index_[k];
