@@ -150,52 +150,78 @@ void World::move_kinematic_bodies(double dt) {
   }
 }
 
-int World::automatic_substeps(double frame_dt) const {
+int World::automatic_substeps(double frame_dt) const { return frame_schedule(frame_dt).substeps; }
+
+int World::automatic_cloth_steps(double frame_dt) const { return frame_schedule(frame_dt).cloth_steps; }
+
+World::FrameSchedule World::frame_schedule(double frame_dt) const {
+  const double limit = settings_.max_substeps;
+  auto bounded = [limit](double steps) { return std::isfinite(steps) ? std::clamp(steps, 1.0, limit) : limit; };
+  const double thinnest = thinnest_body();
+  const double travel = body_travel_steps(frame_dt, thinnest);
+  // bodies: the ceiling applies where bodies interact; with no dynamic body, kinematic bodies
+  // need only as many steps as their travel (and the cloths) ask for
+  const bool dynamic = std::any_of(defs_.begin(), defs_.end(), [](const RigidBodyDef& d) { return !d.kinematic; });
+  const double rigid = bounded(std::max(dynamic ? std::ceil(frame_dt / settings_.max_substep) : 1.0, travel));
+  if (cloths_.empty()) return {static_cast<int>(rigid), 1};
+
+  // cloths: their own ceiling; bodies (a keyed collider, say) crossing no more of themselves
+  // than in a substep; the explicit integrator's speed-of-sound limit; and no vertex crossing
+  // more than the travel fraction of the thinnest body in a step. A cloth that a dynamic
+  // body may touch within the frame steps with the bodies, every substep: its push on the
+  // body is the momentum its vertices lose in contact, which is too little, at coarse steps,
+  // to hold a heavy body (a ball falls through a hammock at 1/60 s)
+  double steps = std::max(std::ceil(frame_dt / settings_.cloth_max_substep), travel);
+  Box3 reach;                  // the cloths now
+  double fastest = 0.0;        // their fastest vertex (m/s)
+  double reach_speed = 0.0;    // ... or their thickness over the frame, whichever is more
+  for (size_t c = 0; c < cloths_.size(); ++c) {
+    const Cloth& cloth = cloths_[c];
+    if (cloth.integrator() == ClothIntegrator::kExplicit) {
+      steps = std::max(steps, std::ceil(frame_dt / cloth.stable_explicit_step()));
+    }
+    for (int k = 0; k < cloth.vertex_count(); ++k) {
+      reach.extend(Vec3(cloth.positions().row(k).transpose()));
+      fastest = std::max(fastest, cloth.velocities().row(k).norm());
+    }
+    reach_speed = std::max({reach_speed, fastest, cloth_thickness_[c] / frame_dt});
+  }
+  const double gravity_speed = settings_.gravity.norm() * frame_dt;  // what gravity adds in a frame
+  if (body_count() > 0) {
+    steps = std::max(steps, std::ceil((fastest + gravity_speed) * frame_dt / (settings_.travel_fraction * thinnest)));
+  }
+  if (dynamic_body_near(reach, reach_speed + gravity_speed, frame_dt)) steps = std::max(steps, rigid);
+  const double cloth_steps = bounded(steps);
   // a whole number of substeps per cloth step
-  const double steps = automatic_rigid_substeps(frame_dt);
-  const double cloth_steps = automatic_cloth_steps(frame_dt);
-  return static_cast<int>(std::min(cloth_steps * std::ceil(steps / cloth_steps), double(settings_.max_substeps)));
+  return {static_cast<int>(std::min(cloth_steps * std::ceil(rigid / cloth_steps), limit)), static_cast<int>(cloth_steps)};
 }
 
-bool World::dynamic_body_near_cloth(double frame_dt) const {
-  // the cloths' box over the frame against each awake dynamic body's bounding sphere over it
-  Box3 reach;
-  double reach_speed = 0.0;
-  for (size_t c = 0; c < cloths_.size(); ++c) {
-    const Points& x = cloths_[c].positions();
-    for (Eigen::Index k = 0; k < x.rows(); ++k) reach.extend(Vec3(x.row(k).transpose()));
-    for (Eigen::Index k = 0; k < x.rows(); ++k) reach_speed = std::max(reach_speed, cloths_[c].velocities().row(k).norm());
-    reach_speed = std::max(reach_speed, cloth_thickness_[c] / frame_dt);
-  }
-  const double g = settings_.gravity.norm() * frame_dt;
+bool World::dynamic_body_near(const Box3& reach, double reach_speed, double frame_dt) const {
+  // each awake dynamic body's bounding sphere, grown by what it and the cloth may travel over
+  // the frame, against the cloths' box
   for (int i = 0; i < body_count(); ++i) {
     if (defs_[i].kinematic || asleep_[i]) continue;
     const Vec3 omega = angular_velocity(defs_[i], states_[i]);
-    const double speed = states_[i].v.norm() + omega.norm() * defs_[i].bounding_radius + g;
-    const double radius = defs_[i].bounding_radius + (speed + reach_speed + g) * frame_dt;
+    const double speed = states_[i].v.norm() + omega.norm() * defs_[i].bounding_radius + settings_.gravity.norm() * frame_dt;
+    const double radius = defs_[i].bounding_radius + (speed + reach_speed) * frame_dt;
     const Vec3 nearest = states_[i].x.cwiseMax(reach.min()).cwiseMin(reach.max());
     if ((nearest - states_[i].x).norm() <= radius) return true;
   }
   return false;
 }
 
-int World::automatic_rigid_substeps(double frame_dt) const {
-  // the ceiling applies where bodies interact: with no dynamic body, kinematic bodies need
-  // only as many steps as their travel (and the cloths) ask for
-  const bool dynamic = std::any_of(defs_.begin(), defs_.end(), [](const RigidBodyDef& d) { return !d.kinematic; });
-  const double steps = std::max(dynamic ? std::ceil(frame_dt / settings_.max_substep) : 1.0, body_travel_steps(frame_dt));
-  if (!std::isfinite(steps)) return settings_.max_substeps;
-  return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
+double World::thinnest_body() const {
+  double thinnest = std::numeric_limits<double>::infinity();
+  for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);
+  return thinnest;
 }
 
-double World::body_travel_steps(double frame_dt) const {
+double World::body_travel_steps(double frame_dt, double thinnest) const {
   // Each body may travel a fraction of its thickness per substep (no tunnelling through its
   // own thinnest part), nor more than twice that fraction of the scene's thinnest body (no
   // tunnelling through a thin post or plate); its speed over the frame is bounded by the
   // current speed of its fastest point plus what gravity adds in one frame.
   double steps = 1.0;
-  double thinnest = std::numeric_limits<double>::infinity();
-  for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);
   for (int i = 0; i < body_count(); ++i) {
     if (asleep_[i]) continue;
     const RigidBodyDef& def = defs_[i];
@@ -215,39 +241,14 @@ double World::body_travel_steps(double frame_dt) const {
   return steps;
 }
 
-int World::automatic_cloth_steps(double frame_dt) const {
-  // the cloth's own ceiling, the explicit integrator's speed-of-sound limit, and no vertex
-  // crossing more than the travel fraction of the thinnest body in a step. A cloth that a
-  // dynamic body may touch within the frame steps with the bodies, every substep: its push
-  // on the body is the momentum its vertices lose in contact, which is too little, at
-  // coarse steps, to hold a heavy body (a ball falls through a hammock at 1/60 s)
-  if (cloths_.empty()) return 1;
-  // bodies (a keyed collider, say) may not cross more of themselves than in a substep either
-  double steps = std::max(std::ceil(frame_dt / settings_.cloth_max_substep), body_travel_steps(frame_dt));
-  if (dynamic_body_near_cloth(frame_dt)) steps = automatic_rigid_substeps(frame_dt);
-  double thinnest = std::numeric_limits<double>::infinity();
-  for (const RigidBodyDef& def : defs_) thinnest = std::min(thinnest, def.thickness);
-  for (const Cloth& cloth : cloths_) {
-    if (cloth.integrator() == ClothIntegrator::kExplicit) {
-      steps = std::max(steps, std::ceil(frame_dt / cloth.stable_explicit_step()));
-    }
-    if (body_count() == 0) continue;
-    double fastest = 0.0;
-    for (int k = 0; k < cloth.vertex_count(); ++k) fastest = std::max(fastest, cloth.velocities().row(k).norm());
-    fastest += settings_.gravity.norm() * frame_dt;
-    steps = std::max(steps, std::ceil(fastest * frame_dt / (settings_.travel_fraction * thinnest)));
-  }
-  if (!std::isfinite(steps)) return settings_.max_substeps;
-  return static_cast<int>(std::clamp(steps, 1.0, double(settings_.max_substeps)));
-}
-
 int World::step_frame(double frame_dt, int substeps) {
   require(frame_dt > 0.0 && std::isfinite(frame_dt), "frame_dt must be > 0");
-  const int n = std::min(substeps > 0 ? substeps : automatic_substeps(frame_dt), settings_.max_substeps);
-  const double dt = frame_dt / n;
   // the cloths step once every `group` substeps, over the group's time (a fixed substep
   // count steps them every substep)
-  const int cloth_steps = substeps > 0 ? n : std::min(automatic_cloth_steps(frame_dt), n);
+  const FrameSchedule schedule = substeps > 0 ? FrameSchedule{substeps, substeps} : frame_schedule(frame_dt);
+  const int n = std::min(schedule.substeps, settings_.max_substeps);
+  const double dt = frame_dt / n;
+  const int cloth_steps = std::min(schedule.cloth_steps, n);
   const int group = n % cloth_steps == 0 ? n / cloth_steps : 1;
   tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
   arena.execute([&] {

@@ -175,10 +175,15 @@ class World {
   };
   // one substep of the rigid bodies (every stage but step_cloths)
   void step_bodies(double dt);
-  // the substeps the bodies alone need; whether a dynamic body may touch a cloth this frame
-  int automatic_rigid_substeps(double frame_dt) const;
-  double body_travel_steps(double frame_dt) const;  // steps that keep each body's travel short
-  bool dynamic_body_near_cloth(double frame_dt) const;
+  // the automatic substeps and cloth steps of the next frame (see automatic_substeps)
+  struct FrameSchedule {
+    int substeps, cloth_steps;
+  };
+  FrameSchedule frame_schedule(double frame_dt) const;
+  double thinnest_body() const;                                      // (m), infinite with no body
+  double body_travel_steps(double frame_dt, double thinnest) const;  // steps that keep each body's travel short
+  // whether an awake dynamic body may touch the cloths' box `reach` within the frame
+  bool dynamic_body_near(const Box3& reach, double reach_speed, double frame_dt) const;
   // stages
   void move_kinematic_bodies(double dt);
   void broad_phase(double dt);
