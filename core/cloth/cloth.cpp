@@ -187,11 +187,6 @@ class BlockJacobi {
   std::vector<Mat3, Eigen::aligned_allocator<Mat3>> inverse_;
 };
 
-// The implicit step's scratch: the system matrix (the cloth's fixed pattern)
-struct Cloth::ImplicitSolver {
-  Eigen::SparseMatrix<double> system;
-};
-
 namespace {
 
 constexpr int kStrainSweeps = 8;            // Gauss-Seidel sweeps of the strain limiter before the global pass
@@ -341,8 +336,7 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity) {
 void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
   if (free_count_ == 0) return;
   const int n = vertex_count();
-  ImplicitSolver& solver = solver_.get();
-  Eigen::SparseMatrix<double>& system = solver.system;
+  Eigen::SparseMatrix<double>& system = system_;
   if (system.rows() == 0) system = pattern_->make_matrix();
   system.coeffs().setZero();
   // elastic forces at the prediction and their Hessian, then damping at the midpoint

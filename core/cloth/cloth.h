@@ -14,6 +14,8 @@
 
 #include "math/types.h"
 
+#include <Eigen/SparseCore>
+
 #include <memory>
 #include <vector>
 
@@ -23,24 +25,6 @@ namespace cloth_detail {
 class ForceModel;     // cloth/cloth_forces.h: topology, rest state and element forces
 class MatrixPattern;  // cloth/cloth_forces.h: the implicit system's sparsity pattern
 }
-
-// Scratch memory of one object: a copy starts with none of its own (never shared)
-template <class T>
-class Scratch {
- public:
-  Scratch() = default;
-  Scratch(const Scratch&) {}
-  Scratch& operator=(const Scratch&) { data_.reset(); return *this; }
-  Scratch(Scratch&&) = default;
-  Scratch& operator=(Scratch&&) = default;
-  T& get() {
-    if (!data_) data_ = std::make_shared<T>();
-    return *data_;
-  }
-
- private:
-  std::shared_ptr<T> data_;
-};
 
 enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
@@ -117,8 +101,7 @@ class Cloth {
   // construction, so copies of a Cloth share it
   std::shared_ptr<const cloth_detail::ForceModel> model_;
   std::shared_ptr<const cloth_detail::MatrixPattern> pattern_;
-  struct ImplicitSolver;  // cloth.cpp: the system matrix and its factorization
-  Scratch<ImplicitSolver> solver_;
+  Eigen::SparseMatrix<double> system_;  // the implicit step's matrix (pattern_'s), rebuilt each step
   std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
   int free_count_ = 0;
   double stable_step_ = 0.0;     // stable_explicit_step(), computed once

@@ -306,7 +306,9 @@ void World::gather_statistics() {
     potential -= settings_.gravity.dot(states_[i].x) / defs_[i].inverse_mass;
   }
   double elastic = 0.0, strain = 0.0;
+  long long iterations = 0;
   for (const Cloth& c : cloths_) {
+    iterations += c.solver_iterations();
     kinetic += c.kinetic_energy();
     potential += c.potential_energy(settings_.gravity);
     elastic += c.elastic_energy();
@@ -316,6 +318,7 @@ void World::gather_statistics() {
   stats_.potential_energy = potential;
   stats_.elastic_energy = elastic;
   stats_.max_cloth_strain = strain;
+  stats_.cloth_solver_iterations = iterations;
   stats_.max_penetration = max_penetration();
   stats_.cloth_penetration = cloth_penetration();
 }
