@@ -6,6 +6,7 @@
 
 #include "cloth/cloth.h"
 #include "cloth/cloth_forces.h"
+#include "test_support.h"
 
 #include <Eigen/Eigenvalues>
 
@@ -18,26 +19,8 @@ using namespace simbake::cloth_detail;
 
 namespace {
 
-// A flat grid of nx x nz vertices spanning size_x x size_z in the XZ plane (y = 0), the
-// corner (0, 0) at the origin, vertex (i, j) at index j * nx + i; each cell split along
-// (i, j)-(i+1, j+1) as the pipeline's grid_mesh does
-ClothDesc grid(int nx, int nz, double size_x, double size_z) {
-  ClothDesc d;
-  d.rest.resize(nx * nz, 3);
-  for (int j = 0; j < nz; ++j) {
-    for (int i = 0; i < nx; ++i) d.rest.row(j * nx + i) << size_x * i / (nx - 1), 0.0, size_z * j / (nz - 1);
-  }
-  d.triangles.resize(2 * (nx - 1) * (nz - 1), 3);
-  int t = 0;
-  for (int j = 0; j + 1 < nz; ++j) {
-    for (int i = 0; i + 1 < nx; ++i) {
-      const int p00 = j * nx + i, p10 = p00 + 1, p01 = p00 + nx, p11 = p01 + 1;
-      d.triangles.row(t++) << p00, p01, p11;
-      d.triangles.row(t++) << p00, p11, p10;
-    }
-  }
-  return d;
-}
+// a grid cloth with its (0, 0) corner at the origin
+ClothDesc grid(int nx, int nz, double size_x, double size_z) { return test::grid_cloth(nx, nz, size_x, size_z); }
 
 Points random_offsets(int n, double amplitude, unsigned seed) {
   std::mt19937 rng(seed);

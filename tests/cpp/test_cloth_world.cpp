@@ -11,24 +11,7 @@ namespace {
 
 // A square grid cloth in the XZ plane, centred at `centre`, vertex (i, j) at index j * n + i
 ClothDesc square_cloth(double size, int n, const Vec3& centre) {
-  ClothDesc d;
-  d.rest.resize(n * n, 3);
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) {
-      d.rest.row(j * n + i) << centre.x() + (double(i) / (n - 1) - 0.5) * size, centre.y(),
-          centre.z() + (double(j) / (n - 1) - 0.5) * size;
-    }
-  }
-  d.triangles.resize(2 * (n - 1) * (n - 1), 3);
-  int t = 0;
-  for (int j = 0; j + 1 < n; ++j) {
-    for (int i = 0; i + 1 < n; ++i) {
-      const int p00 = j * n + i, p10 = p00 + 1, p01 = p00 + n, p11 = p01 + 1;
-      d.triangles.row(t++) << p00, p01, p11;
-      d.triangles.row(t++) << p00, p11, p10;
-    }
-  }
-  return d;
+  return grid_cloth(n, n, size, size, centre - Vec3(0.5 * size, 0.0, 0.5 * size));
 }
 
 }  // namespace
