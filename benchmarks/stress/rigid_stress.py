@@ -72,7 +72,6 @@ import datetime
 import json
 import math
 import os
-import platform
 import resource
 import signal
 import subprocess
@@ -82,6 +81,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import common  # noqa: E402  (benchmarks/common.py: machine info)
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS_DIR = ROOT / "benchmarks" / "results"
@@ -986,23 +988,6 @@ def core_library() -> dict:
             .isoformat(timespec="seconds")}
 
 
-def machine_info() -> dict:
-    from simbake import _core
-    model = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {"platform": platform.platform(), "cpu_model": model, "logical_cpus": os.cpu_count(),
-            "allowed_cpus": sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else [],
-            "load_average_1_5_15_min": list(os.getloadavg()), "python": sys.version.split()[0],
-            "numpy": np.__version__, "simbake_version": _core.__version__,
-            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("axes", nargs="*", help=f"axes to run (default all): {', '.join(CASES)}")
@@ -1040,7 +1025,7 @@ def main() -> None:
         records = sorted(kept + records, key=lambda r: order.index(r["axis"]))  # stable within an axis
         axes = sorted({r["axis"] for r in records}, key=order.index)
     breaks = breaking_points(records)
-    info = machine_info()
+    info = common.machine_info()
     RESULTS_DIR.mkdir(parents=True, exist_ok=True)
     library = {"at_start": library_at_start, "at_end": core_library()}
     library["changed_during_run"] = library["at_start"]["sha256"] != library["at_end"]["sha256"]
