@@ -7,7 +7,9 @@
 
 #include "geometry/mass_properties.h"
 #include "geometry/mesh.h"
+#include "geometry/triangle_intersection.h"
 #include "levelset/vdb_levelset.h"
+#include "world/quality.h"
 #include "world/world.h"
 
 namespace py = pybind11;
@@ -78,6 +80,18 @@ PYBIND11_MODULE(_core, m) {
           return surface_samples(to_mesh(v, t), spacing);
         }, py::arg("vertices"), py::arg("triangles"), py::arg("max_spacing"),
         "Vertices plus points along every edge longer than max_spacing");
+  m.def("intersecting_triangle_pairs", [](const Points& v, const Triangles& t) {
+          to_mesh(v, t);
+          std::vector<std::pair<int, int>> pairs;
+          {
+            py::gil_scoped_release release;
+            pairs = intersecting_triangle_pairs(v, t);
+          }
+          Eigen::Matrix<std::int32_t, Eigen::Dynamic, 2, Eigen::RowMajor> out(pairs.size(), 2);
+          for (size_t k = 0; k < pairs.size(); ++k) out.row(k) << pairs[k].first, pairs[k].second;
+          return out;
+        }, py::arg("vertices"), py::arg("triangles"),
+        "Pairs (k, 2), sorted, of triangles that share no vertex and cross each other");
   m.def("is_closed", [](const Points& v, const Triangles& t) { return is_closed(to_mesh(v, t)); },
         py::arg("vertices"), py::arg("triangles"));
   m.def("mass_properties", [](const Points& v, const Triangles& t) { return mass_dict(mass_properties(to_mesh(v, t))); },
@@ -272,6 +286,30 @@ PYBIND11_MODULE(_core, m) {
              d["cloth_solver_iterations"] = s.cloth_solver_iterations;
              return d;
            })
+      .def("quality", [](const World& w) {
+             FrameQuality q;
+             {
+               py::gil_scoped_release release;
+               q = measure_quality(w);
+             }
+             const auto figure = [](const PenetrationFigure& p) {
+               return py::make_tuple(p.depth, p.a, p.b);
+             };
+             py::dict d;
+             d["body_penetration"] = figure(q.body_penetration);
+             py::list cloths;
+             for (const ClothQuality& c : q.cloths) {
+               py::dict cd;
+               cd["max_strain"] = c.max_strain;
+               cd["self_intersections"] = c.self_intersections;
+               cd["vertex_penetration"] = figure(c.vertex_penetration);
+               cd["edge_penetration"] = figure(c.edge_penetration);
+               cloths.append(cd);
+             }
+             d["cloths"] = cloths;
+             return d;
+           }, "Quality figures of the current state (world/quality.h): penetrations as (depth m, inside, "
+              "into; -1 = none or the ground), per cloth its largest strain and self-intersections")
       .def("profile", [](const World& w) {
              const StageProfile& p = w.profile();
              py::dict d;

@@ -112,6 +112,7 @@ class World {
   explicit World(const WorldSettings& settings = WorldSettings());
 
   void set_ground(const GroundDef& ground);
+  const std::optional<GroundDef>& ground() const { return ground_; }
   // Validates and adds a body; returns its index (bodies are addressed by index)
   int add_body(const BodyDesc& desc);
   // Adds a cloth that collides with every body and the ground with this friction and keeps

@@ -1,0 +1,139 @@
+// The quality figures (world/quality.h, geometry/triangle_intersection.h) against
+// configurations with known answers.
+#include <gtest/gtest.h>
+
+#include "geometry/triangle_intersection.h"
+#include "test_support.h"
+#include "world/quality.h"
+
+#include <random>
+
+using namespace simbake;
+using namespace simbake::test;
+
+namespace {
+
+// All crossing pairs by testing every pair: the reference for the grid's candidate search
+std::vector<std::pair<int, int>> brute_force_pairs(const Points& x, const Triangles& t) {
+  std::vector<std::pair<int, int>> pairs;
+  for (int i = 0; i < t.rows(); ++i) {
+    for (int j = i + 1; j < t.rows(); ++j) {
+      bool shared = false;
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) shared = shared || t(i, a) == t(j, b);
+      if (shared) continue;
+      if (triangles_intersect(x.row(t(i, 0)), x.row(t(i, 1)), x.row(t(i, 2)), x.row(t(j, 0)), x.row(t(j, 1)),
+                              x.row(t(j, 2)))) {
+        pairs.emplace_back(i, j);
+      }
+    }
+  }
+  return pairs;
+}
+
+}  // namespace
+
+TEST(TriangleIntersection, KnownConfigurations) {
+  const Vec3 a0(0, 0, 0), a1(1, 0, 0), a2(0, 0, 1);
+  // a vertical triangle piercing the flat one through its middle
+  EXPECT_TRUE(triangles_intersect(a0, a1, a2, Vec3(0.2, -1, 0.2), Vec3(0.2, 1, 0.2), Vec3(0.3, 1, 0.3)));
+  // the same, moved beyond the flat triangle's hypotenuse: it crosses the plane only
+  EXPECT_FALSE(triangles_intersect(a0, a1, a2, Vec3(0.8, -1, 0.8), Vec3(0.8, 1, 0.8), Vec3(0.9, 1, 0.9)));
+  // parallel, 1 mm apart
+  EXPECT_FALSE(triangles_intersect(a0, a1, a2, a0 + Vec3(0, 1e-3, 0), a1 + Vec3(0, 1e-3, 0), a2 + Vec3(0, 1e-3, 0)));
+  // crossing like two links of a chain: neither has a vertex inside the other, edges pierce
+  EXPECT_TRUE(triangles_intersect(Vec3(-1, 0, -1), Vec3(1, 0, -1), Vec3(0, 0, 1), Vec3(0, -1, 0), Vec3(0, 1, 0),
+                                  Vec3(0, 0.5, -3)));
+  // symmetric in its arguments
+  EXPECT_TRUE(triangles_intersect(Vec3(0.2, -1, 0.2), Vec3(0.2, 1, 0.2), Vec3(0.3, 1, 0.3), a0, a1, a2));
+}
+
+TEST(TriangleIntersection, FlatAndDrapedGridsHaveNone) {
+  ClothDesc grid = grid_cloth(33, 33, 2.0, 2.0);
+  EXPECT_TRUE(intersecting_triangle_pairs(grid.rest, grid.triangles).empty());
+  // a smooth wave: adjacent triangles meet at angles, none crosses
+  for (Eigen::Index k = 0; k < grid.rest.rows(); ++k) grid.rest(k, 1) = 0.3 * std::sin(4.0 * grid.rest(k, 0));
+  EXPECT_TRUE(intersecting_triangle_pairs(grid.rest, grid.triangles).empty());
+}
+
+TEST(TriangleIntersection, GridSearchFindsWhatEveryPairFinds) {
+  // a grid crumpled at random (heights of two cell sizes) and with a fold of its far half
+  // back under the near half: the grid search must find exactly the all-pairs test's pairs
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> crumple(-0.1, 0.1), jitter(-0.01, 0.01);
+  ClothDesc grid = grid_cloth(21, 21, 1.0, 1.0);
+  for (Eigen::Index k = 0; k < grid.rest.rows(); ++k) {
+    const double z = grid.rest(k, 2);
+    if (z > 0.5) grid.rest.row(k) << grid.rest(k, 0), 0.0, 1.0 - z;
+    grid.rest(k, 0) += jitter(rng);
+    grid.rest(k, 1) += crumple(rng);
+    grid.rest(k, 2) += jitter(rng);
+  }
+  const auto reference = brute_force_pairs(grid.rest, grid.triangles);
+  const auto found = intersecting_triangle_pairs(grid.rest, grid.triangles);
+  EXPECT_GT(reference.size(), 100u);
+  EXPECT_EQ(found, reference);
+}
+
+TEST(TriangleIntersection, CountsACrossOfTwoStrips) {
+  // two one-cell strips crossing at right angles, each of two triangles: the vertical
+  // strip's near triangle crosses both of the flat one's (its diagonal runs under it), and
+  // the flat strip's edges pierce the vertical strip's triangles: 4 pairs at most
+  Points x(8, 3);
+  x << -1, 0, -0.2, 1, 0, -0.2, 1, 0, 0.2, -1, 0, 0.2,  // flat strip along x
+      -0.1, -1, 0, 0.1, -1, 0, 0.1, 1, 0, -0.1, 1, 0;  // vertical strip in the z = 0 plane
+  Triangles t(4, 3);
+  t << 0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7;
+  const auto pairs = intersecting_triangle_pairs(x, t);
+  EXPECT_EQ(pairs, brute_force_pairs(x, t));
+  EXPECT_FALSE(pairs.empty());
+  for (const auto& [i, j] : pairs) EXPECT_TRUE(i < 2 && j >= 2);
+}
+
+TEST(Quality, BoxPushedOneCentimetreIntoAnother) {
+  World world;
+  world.set_ground(GroundDef{});
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(0, 0.5, 0)));
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(0.3, 1.49, 0.1)));
+  const PenetrationFigure p = body_penetration(world);
+  EXPECT_NEAR(p.depth, 0.01, 1e-12);
+  EXPECT_EQ(std::min(p.a, p.b), 0);
+  EXPECT_EQ(std::max(p.a, p.b), 1);
+}
+
+TEST(Quality, BoxSunkIntoTheGroundAndKinematicPairsIgnored) {
+  World world;
+  world.set_ground(GroundDef{0.0, 0.5, 0.0});
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(5, 0.497, 0)));
+  BodyDesc wall = box_body(Vec3(1, 1, 1), 1.0, Vec3(0, 0.0, 0));  // half in the ground, kinematic
+  wall.kinematic = true;
+  world.add_body(wall);
+  BodyDesc other = wall;  // overlapping the first kinematic one by half: not the solver's doing
+  other.origin = Vec3(0.5, 0.0, 0);
+  world.add_body(other);
+  const PenetrationFigure p = body_penetration(world);
+  EXPECT_NEAR(p.depth, 0.003, 1e-12);
+  EXPECT_EQ(p.a, 0);
+  EXPECT_EQ(p.b, -1);
+}
+
+TEST(Quality, ClothEdgeThroughASphereBetweenVerticesOutside) {
+  // one triangle whose edge from (-1, 0.4, 0) to (1, 0.4, 0) passes 0.4 m from the centre of
+  // a 0.5 m sphere: its vertices are outside, its midpoint 0.1 m inside
+  World world;
+  world.add_body(sphere_body(0.5, 1.0, Vec3::Zero()));
+  ClothDesc d;
+  d.rest.resize(3, 3);
+  d.rest << -1, 0.4, 0, 1, 0.4, 0, 0, 0.4, 2;
+  d.triangles.resize(1, 3);
+  d.triangles << 0, 1, 2;
+  world.add_cloth(d, 0.3, 0.005);
+  const ClothQuality q = cloth_quality(world, 0);
+  EXPECT_EQ(q.vertex_penetration.depth, 0.0);
+  EXPECT_EQ(q.vertex_penetration.a, -1);
+  EXPECT_NEAR(q.edge_penetration.depth, 0.1, 1e-12);
+  EXPECT_EQ(q.edge_penetration.a, 0);
+  EXPECT_EQ(q.edge_penetration.b, 0);
+  EXPECT_NEAR(q.max_strain, 0.0, 1e-15);
+  EXPECT_EQ(q.self_intersections, 0);
+}
