@@ -74,8 +74,10 @@ PenetrationFigure body_penetration(const World& w) {
       const int j = order[q];
       if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
       if ((w.body_state(j).x - xi).norm() > ri + w.body_def(j).bounding_radius) continue;
-      samples_inside(w, i, j, poses, deepest);
-      samples_inside(w, j, i, poses, deepest);
+      // a dynamic body's samples first, so that on a tie it is named as the one inside
+      const bool i_first = !w.body_def(i).kinematic;
+      samples_inside(w, i_first ? i : j, i_first ? j : i, poses, deepest);
+      samples_inside(w, i_first ? j : i, i_first ? i : j, poses, deepest);
     }
   }
   return deepest;

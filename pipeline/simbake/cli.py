@@ -61,6 +61,8 @@ def _bake(scene_path: str, output: str | None, quiet: bool) -> int:
         if bar is not None:
             bar.close()
     print(f"baked {stats.summary()}")
+    for line in stats.warnings:
+        print(f"simbake: warning: {line}", file=sys.stderr)
     return 0
 
 

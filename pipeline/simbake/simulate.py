@@ -18,6 +18,7 @@ from . import _core, __version__
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import SceneError, SimulationError
 from .files import check_output_path
+from .qa import QualityRecorder
 from .scene import Scene
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim
 
@@ -30,8 +31,11 @@ class BakeStats:
     frames: int                    # frames written, the initial state included
     substeps: int                  # solver steps taken in all
     wall_seconds: float
-    max_penetration: float         # deepest penetration seen at any frame (m)
+    max_penetration: float         # deepest penetration seen at any written frame (m): bodies
+                                   # into bodies or the ground, cloth past a surface
     profile: dict = field(default_factory=dict)  # wall seconds per stage of the step
+    qa: Path | None = None         # the QA sidecar (CACHE.qa.json), None when qa=False
+    warnings: list = field(default_factory=list)  # QA figures over their thresholds, one line each
 
     def summary(self) -> str:
         return (f"{self.frames} frames, {self.substeps} substeps, {self.wall_seconds:.2f} s wall, "
@@ -81,10 +85,12 @@ def _provenance(scene: Scene) -> dict:
 
 
 def bake(scene: Scene, output: str | Path, *,
-         on_frame: Callable[[int, int], None] | None = None) -> BakeStats:
+         on_frame: Callable[[int, int], None] | None = None, qa: bool = True) -> BakeStats:
     """Simulate the scene and stream its USD cache to `output` (appears only when complete).
 
-    on_frame(done, total) is called after each written frame (for progress bars).
+    on_frame(done, total) is called after each written frame (for progress bars). With `qa`
+    (the default) every written frame's quality figures are measured (simbake.qa) and written
+    beside the cache as CACHE.qa.json, summarized in its customLayerData.
     """
     output = Path(output)
     check_output_path(output, USD_SUFFIXES)
@@ -105,23 +111,43 @@ def bake(scene: Scene, output: str | Path, *,
                    for cloth, asset in zip(scene.cloths, cloths)]
     frame_dt = 1.0 / scene.fps
     total = scene.frame_count
+    recorder = QualityRecorder(scene) if qa else None
+    pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
     max_penetration = 0.0
     with CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
                      bodies=prims, cloths=cloth_prims, provenance=_provenance(scene)) as writer:
         for frame in range(scene.start_frame, scene.end_frame + 1):
+            frame_start = time.perf_counter()
+            substeps = 0
             if frame > scene.start_frame:
-                world.step_frame(frame_dt, scene.substeps)
+                substeps = world.step_frame(frame_dt, scene.substeps)
                 stats = world.statistics()
                 if not stats["finite"]:
                     raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
                                           "nothing was written (try more [solver] substeps)")
                 max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
+            if recorder is not None:
+                measured = time.perf_counter()
+                recorder.record(frame, world, substeps, measured - frame_start)
+                pipeline_profile["quality"] += time.perf_counter() - measured
+            written = time.perf_counter()
             translations, orientations = world.mesh_poses()
             states = [world.cloth_state(i) for i in range(len(cloths))]
             writer.write_frame(frame, translations, orientations, cloth_points=[s[0] for s in states],
                                cloth_velocities=[s[1] for s in states], cloth_normals=[s[2] for s in states])
+            pipeline_profile["usd_writer"] += time.perf_counter() - written
             if on_frame:
                 on_frame(frame - scene.start_frame + 1, total)
+        if recorder is not None:
+            writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
+    profile = {**world.profile(), **pipeline_profile}
+    sidecar, warnings = None, []
+    if recorder is not None:
+        summary = recorder.summary()
+        max_penetration = max(summary[k]["worst"] for k in ("body_penetration", "cloth_penetration")
+                              if k in summary)
+        sidecar = recorder.write(output, profile)
+        warnings = recorder.warnings(sidecar.name)
     return BakeStats(output=output, frames=total, substeps=int(world.statistics()["substeps"]),
                      wall_seconds=time.perf_counter() - start, max_penetration=max_penetration,
-                     profile=world.profile())
+                     profile=profile, qa=sidecar, warnings=warnings)

@@ -196,6 +196,15 @@ def _to_usd(value: Any, where: str) -> Any:
     raise TypeError(f"provenance {where}: cannot store a {type(value).__name__} in USD")
 
 
+def _merge(into: dict, data: Mapping) -> None:
+    for key, value in data.items():
+        if isinstance(value, Mapping) and isinstance(into.get(key), Mapping):
+            into[key] = dict(into[key])
+            _merge(into[key], value)
+        else:
+            into[key] = value
+
+
 def _extent(points32: np.ndarray) -> Vt.Vec3fArray:
     if points32.shape[0] == 0:
         return Vt.Vec3fArray.FromNumpy(np.zeros((2, 3), np.float32))
@@ -508,6 +517,15 @@ class CacheWriter:
                                               cloth.face_vertex_indices).astype(np.float32))
             out.append((arrays[0], arrays[2], arrays[1]))
         return out
+
+    def add_layer_data(self, data: Mapping[str, Any]) -> None:
+        """Merge `data` into the layer's customLayerData (nested dictionaries merged key by
+        key), e.g. a summary known only once every frame is written; same rules as provenance."""
+        if self._done or self._layer is None:
+            raise RuntimeError(f"{self.path}: writer is already closed")
+        merged = dict(self._layer.customLayerData)
+        _merge(merged, _to_usd(dict(data), "customLayerData"))
+        self._layer.customLayerData = merged
 
     # -- finishing ----------------------------------------------------------------------------
 

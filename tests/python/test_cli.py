@@ -106,7 +106,8 @@ def test_bake_writes_cache_and_summary(write_scene, tmp_path):
     assert "out.usdc" in summary
     # stderr is not a terminal here: no progress bar, nothing at all
     assert result.stderr == ""
-    assert listing(tmp_path) == ["out.usdc", "scene.toml"]  # and no temp file left behind
+    # the cache and its QA sidecar, and no temp file left behind
+    assert listing(tmp_path) == ["out.qa.json", "out.usdc", "scene.toml"]
 
 
 def _bake_on_a_tty(args, cwd: Path) -> tuple[int, str]:
@@ -172,7 +173,7 @@ def test_default_output_is_scene_name_in_the_working_directory(write_scene, mesh
     """, "scenes/drop.toml")
     result = simbake("bake", "../scenes/drop.toml", cwd=work)
     assert result.returncode == 0, result.stderr
-    assert listing(work) == ["drop.usdc"]                     # in the cwd, named after the scene...
+    assert listing(work) == ["drop.qa.json", "drop.usdc"]     # in the cwd, named after the scene...
     assert listing(scenes) == ["drop.toml", "lshape.obj"]     # ...not beside the scene file
     assert (work / "drop.usdc").read_bytes().startswith(b"PXR-USDC")
     assert "drop.usdc" in result.stdout
@@ -185,7 +186,7 @@ def test_usda_output_is_text(write_scene, tmp_path):
     text = (tmp_path / "out.usda").read_text()
     assert text.startswith("#usda 1.0")
     assert 'defaultPrim = "World"' in text and "xformOp:translate.timeSamples" in text
-    assert listing(tmp_path) == ["out.usda", "scene.toml"]  # the crate temp file is gone too
+    assert listing(tmp_path) == ["out.qa.json", "out.usda", "scene.toml"]  # the crate temp file is gone too
 
 
 @pytest.mark.parametrize("suffix", [".usdc", ".usda"])
@@ -196,7 +197,7 @@ def test_successful_bake_replaces_an_existing_file(write_scene, tmp_path, suffix
     result = simbake("bake", "scene.toml", "-o", out.name, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert out.read_bytes().startswith(b"#usda" if suffix == ".usda" else b"PXR-USDC")
-    assert listing(tmp_path) == sorted([out.name, "scene.toml"])
+    assert listing(tmp_path) == sorted([out.name, "out.qa.json", "scene.toml"])
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,0 +1,248 @@
+"""Quality figures of a bake, frame by frame: what a render would show wrong, in numbers.
+
+The driver hands each written frame's world to :class:`QualityRecorder`, which asks the core
+for the figures (``World.quality()``, measured apart from the solver: core/world/quality.h)
+and keeps them with the frame's substeps, wall time and kinetic energy. At the end they go
+into a sidecar ``CACHE.qa.json`` (written whole or not at all), a summary into the cache's
+``customLayerData["simbake"]["qa"]``, and one warning line per figure that crossed its
+threshold.
+
+Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
+
+* ``body_penetration``: 5 mm. A dynamic body's surface sample inside another body or the
+  ground. The contact solver keeps resting contacts within 0.2 mm; 5 mm is ~5 pixels of a
+  2 m wide shot at 1080p, where a render starts to show it.
+* ``cloth_penetration``: 1 mm past a body's or the ground's surface, at a cloth vertex or
+  an edge's quarter points (the cloth's thickness not counted): the cloth keeps its
+  thickness (5 mm by default) away from surfaces, so anything past the surface is a miss.
+* ``cloth_strain``: the cloth's ``strain_limit`` plus 1% of it (no threshold when 0).
+* ``cloth_self_intersections``: 0 crossing pairs of triangles (a layer through another).
+* ``substeps``: a frame that needed the solver's cap (``max_substeps``, 4096).
+
+The JSON layout (version 1)::
+
+    {"simbake_qa": 1, "cache": ..., "scene": {...}, "thresholds": {...},
+     "frames": [...], "time": [...],            # frame numbers, seconds from the start
+     "figures": {"substeps": [...], "wall_seconds": [...], "kinetic_energy": [...],
+                 "body_penetration": [...], "body_penetration_between": [[a, b] | null],
+                 "cloth_penetration": [...], "cloth_strain": [...],
+                 "cloth_self_intersections": [...]},
+     "cloths": {name: {"strain": [...], "self_intersections": [...],
+                       "vertex_penetration": [...], "edge_penetration": [...]}},
+     "summary": {figure: {"worst": v, "frame": f, "threshold": t, "first_over": f | null}},
+     "warnings": [...], "profile": {stage: seconds}}
+
+Lengths are metres, energies joules, times seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from .files import write_atomically
+from .scene import Scene
+
+QA_VERSION = 1
+BODY_PENETRATION = 5e-3       # (m)
+CLOTH_PENETRATION = 1e-3      # (m)
+STRAIN_MARGIN = 0.01          # of the strain limit
+MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
+
+# figure -> (label, unit, how its value is shown)
+FIGURES = {
+    "body_penetration": ("deepest body penetration", "mm", 1e3),
+    "cloth_penetration": ("deepest cloth penetration", "mm", 1e3),
+    "cloth_strain": ("largest cloth strain", "%", 1e2),
+    "cloth_self_intersections": ("cloth self-intersections", "pairs", 1),
+    "kinetic_energy": ("kinetic energy", "J", 1),
+    "substeps": ("substeps", "", 1),
+    "wall_seconds": ("wall time", "s", 1),
+}
+
+
+def qa_path(cache: str | Path) -> Path:
+    """The sidecar of a cache: out.usdc -> out.qa.json."""
+    cache = Path(cache)
+    return cache.with_name(cache.stem + ".qa.json")
+
+
+def thresholds(scene: Scene) -> dict[str, float | None]:
+    """Each figure's threshold for this scene (None: never a warning)."""
+    limits = [c.strain_limit for c in scene.cloths if c.strain_limit > 0]
+    return {
+        "body_penetration": BODY_PENETRATION,
+        "cloth_penetration": CLOTH_PENETRATION if scene.cloths else None,
+        # per cloth (its own limit); this is the largest, for the summary
+        "cloth_strain": max(limits) * (1 + STRAIN_MARGIN) if limits else None,
+        "cloth_self_intersections": 0 if scene.cloths else None,
+        "substeps": MAX_SUBSTEPS - 1,
+        "kinetic_energy": None,
+        "wall_seconds": None,
+    }
+
+
+class QualityRecorder:
+    """Collects the quality figures of every written frame of one bake."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.body_names = [b.name for b in scene.bodies]
+        self.cloth_names = [c.name for c in scene.cloths]
+        self.limits = {c.name: (c.strain_limit * (1 + STRAIN_MARGIN) if c.strain_limit > 0 else None)
+                       for c in scene.cloths}
+        self.thresholds = thresholds(scene)
+        self.frames: list[int] = []
+        self.figures: dict[str, list] = {k: [] for k in (
+            "substeps", "wall_seconds", "kinetic_energy", "body_penetration",
+            "body_penetration_between", "cloth_penetration", "cloth_strain",
+            "cloth_self_intersections")}
+        self.cloths: dict[str, dict[str, list]] = {
+            name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
+                   "edge_penetration": []} for name in self.cloth_names}
+
+    def record(self, frame: int, world, substeps: int, wall_seconds: float) -> None:
+        """The figures of `world` as it is now, written as `frame`."""
+        quality = world.quality()
+        self.frames.append(frame)
+        f = self.figures
+        f["substeps"].append(int(substeps))
+        f["wall_seconds"].append(float(wall_seconds))
+        f["kinetic_energy"].append(float(world.statistics()["kinetic_energy"]))
+        depth, a, b = quality["body_penetration"]
+        f["body_penetration"].append(float(depth))
+        f["body_penetration_between"].append(
+            [self.body_names[a], self.body_names[b] if b >= 0 else "ground"] if a >= 0 else None)
+        deepest, strain, crossings = 0.0, 0.0, 0
+        for name, q in zip(self.cloth_names, quality["cloths"]):
+            c = self.cloths[name]
+            c["strain"].append(float(q["max_strain"]))
+            c["self_intersections"].append(int(q["self_intersections"]))
+            c["vertex_penetration"].append(float(q["vertex_penetration"][0]))
+            c["edge_penetration"].append(float(q["edge_penetration"][0]))
+            deepest = max(deepest, c["vertex_penetration"][-1], c["edge_penetration"][-1])
+            strain = max(strain, c["strain"][-1])
+            crossings += c["self_intersections"][-1]
+        f["cloth_penetration"].append(deepest)
+        f["cloth_strain"].append(strain)
+        f["cloth_self_intersections"].append(crossings)
+
+    # -- results -------------------------------------------------------------------------------
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Per figure: its worst value and frame, its threshold and the first frame over it."""
+        out = {}
+        for name, threshold in self.thresholds.items():
+            values = self.figures[name]
+            if not values or (name.startswith("cloth_") and not self.cloth_names):
+                continue
+            worst = max(range(len(values)), key=lambda k: (values[k], -k))
+            first = None
+            if name == "cloth_strain":
+                first = self._first_strain_over()
+            elif threshold is not None:
+                first = next((self.frames[k] for k, v in enumerate(values) if v > threshold), None)
+            out[name] = {"worst": values[worst], "frame": self.frames[worst],
+                         "threshold": threshold, "first_over": first}
+        return out
+
+    def _first_strain_over(self) -> int | None:
+        """The first frame at which some cloth's strain passed its own limit."""
+        firsts = [next((self.frames[k] for k, v in enumerate(self.cloths[n]["strain"]) if v > limit), None)
+                  for n, limit in self.limits.items() if limit is not None]
+        firsts = [f for f in firsts if f is not None]
+        return min(firsts) if firsts else None
+
+    def warnings(self, sidecar: str | Path) -> list[str]:
+        """One line per figure (per cloth for the cloth figures) over its threshold, naming
+        the worst frame, the first frame over and the figure."""
+        lines = []
+
+        def over(label: str, values: list, threshold: float | None, unit: str, scale: float,
+                 where=lambda k: "") -> None:
+            if threshold is None:
+                return
+            first = next((k for k, v in enumerate(values) if v > threshold), None)
+            if first is None:
+                return
+            worst = max(range(len(values)), key=lambda k: (values[k], -k))
+            lines.append(f"QA: {label} {_show(values[worst], unit, scale)}{where(worst)} at frame "
+                         f"{self.frames[worst]} (over {_show(threshold, unit, scale)} from frame "
+                         f"{self.frames[first]}); see {sidecar}")
+
+        between = self.figures["body_penetration_between"]
+        over("deepest body penetration", self.figures["body_penetration"], self.thresholds["body_penetration"],
+             "mm", 1e3, lambda k: f" ({between[k][0]} into {between[k][1]})" if between[k] else "")
+        for name, c in self.cloths.items():
+            depth = [max(v, e) for v, e in zip(c["vertex_penetration"], c["edge_penetration"])]
+            over(f"cloth {name!r} penetration", depth, CLOTH_PENETRATION, "mm", 1e3)
+            over(f"cloth {name!r} strain", c["strain"], self.limits[name], "%", 1e2)
+            over(f"cloth {name!r} self-intersections", c["self_intersections"], 0, "pairs", 1)
+        over("substeps", self.figures["substeps"], self.thresholds["substeps"], "", 1)
+        return lines
+
+    def layer_summary(self) -> dict[str, Any]:
+        """What goes into the cache's customLayerData["simbake"]["qa"]: worst values and frames."""
+        out: dict[str, Any] = {"sidecar_version": QA_VERSION}
+        for name, s in self.summary().items():
+            if name == "wall_seconds":
+                continue  # differs run to run: the cache must not (same scene, same bytes)
+            out[name] = {"worst": s["worst"], "frame": s["frame"]}
+            if s["first_over"] is not None:
+                out[name]["first_over"] = s["first_over"]
+        out["warnings"] = sum(1 for s in self.summary().values() if s["first_over"] is not None)
+        return out
+
+    def as_dict(self, cache: Path, profile: dict[str, float]) -> dict[str, Any]:
+        sidecar = qa_path(cache)
+        return {
+            "simbake_qa": QA_VERSION,
+            "cache": cache.name,
+            "scene": {"path": str(self.scene.path), "sha256": self.scene.hash(),
+                      "settings": _plain(dataclasses.asdict(self.scene))},
+            "thresholds": self.thresholds,
+            "frames": self.frames,
+            "time": [(f - self.scene.start_frame) / self.scene.fps for f in self.frames],
+            "figures": self.figures,
+            "cloths": self.cloths,
+            "summary": self.summary(),
+            "warnings": self.warnings(sidecar.name),
+            "profile": dict(profile),
+        }
+
+    def write(self, cache: Path, profile: dict[str, float]) -> Path:
+        """Writes the sidecar beside the cache (whole or not at all); returns its path."""
+        path = qa_path(cache)
+        text = json.dumps(self.as_dict(cache, profile), indent=1, allow_nan=False)
+        write_atomically(path, lambda tmp: Path(tmp).write_text(text + "\n"))
+        return path
+
+
+def load_qa(cache_or_sidecar: str | Path) -> dict[str, Any]:
+    """The QA data of a cache (given the cache or its sidecar)."""
+    path = Path(cache_or_sidecar)
+    if not path.name.endswith(".qa.json"):
+        path = qa_path(path)
+    return json.loads(path.read_text())
+
+
+def _show(value: float, unit: str, scale: float) -> str:
+    shown = value * scale
+    text = f"{shown:.3g}" if isinstance(shown, float) and not float(shown).is_integer() else f"{int(shown)}"
+    return f"{text}%" if unit == "%" else f"{text} {unit}".strip()
+
+
+def _plain(value: Any) -> Any:
+    """Scene settings as JSON: paths as strings, tuples as lists, non-finite floats as strings."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
