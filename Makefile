@@ -12,7 +12,9 @@ PY := $(VENV)/bin/python
 BUILD := build/py
 export CMAKE_BUILD_PARALLEL_LEVEL ?= 2
 
-SYSTEM_PACKAGES := g++ make libopenvdb-dev libeigen3-dev libtbb-dev libboost-iostreams-dev libgtest-dev
+# the core's build; then Mesa's CPU OpenGL through EGL for `simbake preview`
+SYSTEM_PACKAGES := g++ make libopenvdb-dev libeigen3-dev libtbb-dev libboost-iostreams-dev libgtest-dev \
+  libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri
 BUILD_REQUIRES := "scikit-build-core>=0.10" "pybind11>=2.12" "cmake>=3.18" ninja
 SOURCES := $(shell find core bindings -name '*.cpp' -o -name '*.h') $(wildcard tests/cpp/*) CMakeLists.txt pyproject.toml
 
@@ -33,8 +35,9 @@ install: $(VENV)/.installed
 
 system: build/.system-packages
 
-# System packages: installed only when missing (dpkg -s is the check)
-build/.system-packages:
+# System packages: installed only when missing (dpkg -s is the check), checked again when
+# this list changes
+build/.system-packages: Makefile
 	@missing=""; for p in $(SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
 	  sudo=""; [ "$$(id -u)" -eq 0 ] || sudo=sudo; \
@@ -51,7 +54,7 @@ $(VENV)/.build-requires: | build/.system-packages
 
 # The package, editable: Python changes need no reinstall; C++ changes rebuild incrementally
 $(VENV)/.installed: $(VENV)/.build-requires $(SOURCES)
-	$(PY) -m pip install -q --no-build-isolation -e '.[test]' \
+	$(PY) -m pip install -q --no-build-isolation -e '.[test,preview]' \
 	  -Cbuild-dir=$(BUILD) -Ccmake.define.SIMBAKE_BUILD_TESTS=ON
 	touch $@
 

@@ -3,6 +3,8 @@
     simbake bake SCENE.toml [-o OUT.usdc] [--quiet]   progress on stderr, summary at the end
     simbake demo [-o OUT.usdc] [--quiet]              bakes the shipped default scene
     simbake check OUT.usdc                            validates a cache
+    simbake preview CACHE.usdc [-o OUT.png|.mp4|.gif] renders it headless (contact sheet or movie)
+    simbake report CACHE.usdc [-o OUT.html|.png]      one page of its QA figures
     simbake levelset MESH -o OUT.vdb [--voxel-size H] bakes one mesh's level set
 
 Bad input ends with one line on stderr naming the file, the key and the problem, exit
@@ -47,7 +49,7 @@ def _progress(enabled: bool):
     return bar, update
 
 
-def _bake(scene_path: str, output: str | None, quiet: bool) -> int:
+def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False) -> int:
     from .scene import load_scene
 
     scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
@@ -61,6 +63,13 @@ def _bake(scene_path: str, output: str | None, quiet: bool) -> int:
         if bar is not None:
             bar.close()
     print(f"baked {stats.summary()}")
+    if preview:
+        from .preview import write_preview
+        from .report import write_report
+
+        movie, _ = write_preview(stats.output)
+        print(f"previewed -> {movie}")
+        print(f"reported -> {write_report(stats.output)}")
     for line in stats.warnings:
         print(f"simbake: warning: {line}", file=sys.stderr)
     return 0
@@ -102,6 +111,22 @@ def _levelset(mesh: str, output: str, voxel_size: float | None) -> int:
     return 0
 
 
+def _preview(cache: str, output: str | None, frames: str | None, camera: str, size: str | None) -> int:
+    from .preview import parse_size, write_preview
+
+    out, count = write_preview(cache, output, frames=frames, camera=camera,
+                               size=parse_size(size) if size else None)
+    print(f"previewed {count} frame(s) of {cache} -> {out}")
+    return 0
+
+
+def _report(cache: str, output: str | None) -> int:
+    from .report import write_report
+
+    print(f"reported {cache} -> {write_report(cache, output)}")
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simbake", description="Bake rigid bodies into USD caches.")
     p.add_argument("--version", action="version", version=f"simbake {__version__}")
@@ -110,11 +135,22 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("scene", help="scene file (.toml)")
     b.add_argument("-o", "--output", help="output cache (.usdc default, .usda); default SCENE.usdc here")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    b.add_argument("--preview", action="store_true",
+                   help="also write CACHE.mp4 (simbake preview) and CACHE.report.html (simbake report)")
     d = sub.add_parser("demo", help="bake the shipped default scene")
     d.add_argument("-o", "--output", default="demo.usdc", help="output cache (default demo.usdc)")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     c = sub.add_parser("check", help="validate a USD cache")
     c.add_argument("cache")
+    pv = sub.add_parser("preview", help="render a cache headless: a contact sheet (.png) or a movie (.mp4, .gif)")
+    pv.add_argument("cache")
+    pv.add_argument("-o", "--output", help="OUT.png (contact sheet), OUT.mp4 or OUT.gif (movie); default CACHE.mp4")
+    pv.add_argument("--frames", help="A:B[:STEP] or A; default: every frame (movie), 8 evenly spaced (sheet)")
+    pv.add_argument("--camera", default="auto", help="auto (frames the whole animation) or a Camera prim's path")
+    pv.add_argument("--size", help="WxH of each frame; default 960x540 (movie), 480x270 (sheet)")
+    r = sub.add_parser("report", help="one page of a cache's QA figures, profile, settings and frames")
+    r.add_argument("cache")
+    r.add_argument("-o", "--output", help="REPORT.html (default CACHE.report.html) or REPORT.png")
     ls = sub.add_parser("levelset", help="bake a closed mesh into an OpenVDB level set")
     ls.add_argument("mesh")
     ls.add_argument("-o", "--output", required=True, help="output .vdb")
@@ -126,11 +162,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         if args.command == "bake":
-            return _bake(args.scene, args.output, args.quiet)
+            return _bake(args.scene, args.output, args.quiet, args.preview)
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":
             return _check(args.cache)
+        if args.command == "report":
+            return _report(args.cache, args.output)
+        if args.command == "preview":
+            return _preview(args.cache, args.output, args.frames, args.camera, args.size)
         return _levelset(args.mesh, args.output, args.voxel_size)
     except SceneError as error:
         print(f"simbake: error: {error}", file=sys.stderr)

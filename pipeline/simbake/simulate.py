@@ -80,6 +80,8 @@ def _provenance(scene: Scene) -> dict:
             "scene": scene.path.name,
             "scene_sha256": scene.hash(),
             "solver": {"substeps": scene.substeps, "fps": scene.fps},
+            # for viewers that draw it (simbake preview): the plane y = height
+            "ground": {"height": scene.ground.height} if scene.ground is not None else None,
         }
     }
 

@@ -15,6 +15,22 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
+
+# two unit boxes, the dynamic one ("b") resting 1 cm deep in the kinematic one ("a"), no
+# gravity: a bake whose first frame's QA reports 10 mm of penetration
+BOXES_ONE_CM_DEEP = """
+    [scene]
+    end_frame = 2
+    gravity = [0.0, 0.0, 0.0]
+    [[bodies]]
+    name = "a"
+    shape = { type = "box", size = [1.0, 1.0, 1.0] }
+    kinematic = true
+    [[bodies]]
+    name = "b"
+    shape = { type = "box", size = [1.0, 1.0, 1.0] }
+    position = [0.0, 0.99, 0.0]
+"""
 MESH_DIR = REPO / "assets" / "meshes"
 
 

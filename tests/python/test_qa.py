@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from conftest import BOXES_ONE_CM_DEEP
+
 import numpy as np
 import pytest
 
@@ -185,19 +187,7 @@ def test_pinned_strip_strain_is_its_weight_over_its_stiffness(tmp_path, write_sc
 
 
 def test_cli_bake_prints_qa_warnings_after_the_summary(write_scene, tmp_path):
-    path = write_scene("""
-        [scene]
-        end_frame = 2
-        gravity = [0.0, 0.0, 0.0]
-        [[bodies]]
-        name = "a"
-        shape = { type = "box", size = [1.0, 1.0, 1.0] }
-        kinematic = true
-        [[bodies]]
-        name = "b"
-        shape = { type = "box", size = [1.0, 1.0, 1.0] }
-        position = [0.0, 0.99, 0.0]
-    """)
+    path = write_scene(BOXES_ONE_CM_DEEP)
     out = tmp_path / "cli.usdc"
     result = subprocess.run([sys.executable, "-m", "simbake", "bake", str(path), "-o", str(out), "-q"],
                             capture_output=True, text=True)

@@ -1,0 +1,249 @@
+"""simbake preview and simbake report: pixels where the camera maps things, movies read back.
+
+The test stage is written here with pxr: a box mesh, two one-sided quads of a double-sided
+(cloth) mesh, one facing the camera and one facing away, a camera prim and a ground height.
+Where each thing lands in the picture is computed here with a pinhole projection of the
+camera's focal length and apertures (chosen with the picture's aspect, so no fitting is
+involved), not with the renderer's matrices.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from conftest import BOXES_ONE_CM_DEEP
+
+import numpy as np
+import pytest
+
+W, H = 320, 180
+FOCAL, H_APERTURE, V_APERTURE = 30.0, 32.0, 18.0  # mm; 32:18 = 16:9 = W:H
+CAMERA_AT = np.array([0.0, 1.0, 6.0])             # looking down -z (USD's camera convention)
+BOX_CENTER, BOX_SIZE = np.array([-1.2, 0.5, 0.0]), 1.0
+
+
+def project(point) -> tuple[int, int]:
+    """Pixel (column, row from the top) of a world point seen by the test camera."""
+    x, y, z = np.asarray(point, dtype=float) - CAMERA_AT
+    u = (FOCAL * x / -z) / (H_APERTURE / 2)  # -1..1 across the picture
+    v = (FOCAL * y / -z) / (V_APERTURE / 2)
+    return int(round((u + 1) / 2 * W)), int(round((1 - v) / 2 * H))
+
+
+def write_stage(path: Path, frames: int = 3, fps: float = 24.0) -> Path:
+    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(frames)
+    stage.SetTimeCodesPerSecond(fps)
+    stage.SetFramesPerSecond(fps)
+    stage.GetRootLayer().customLayerData = {"simbake": {"ground": {"height": 0.0}}}
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    # a box: a closed mesh of six quads, outward, moving up 1 cm a frame
+    body = UsdGeom.Xform.Define(stage, "/World/box")
+    translate = body.AddTranslateOp()
+    for f in range(1, frames + 1):
+        translate.Set(Gf.Vec3d(*(BOX_CENTER + [0, 0.01 * (f - 1), 0])), f)
+    h = BOX_SIZE / 2
+    corners = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    mesh = UsdGeom.Mesh.Define(stage, "/World/box/mesh")
+    mesh.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*c) for c in corners]))
+    mesh.CreateFaceVertexCountsAttr([4] * 6)
+    mesh.CreateFaceVertexIndicesAttr([i for q in quads for i in q])
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    # the cloth: two quads in the plane z = 0, the left one wound towards the camera (front),
+    # the right one away from it (back)
+    cloth = UsdGeom.Mesh.Define(stage, "/World/sheet")
+    pts = [(0.4, 0.2, 0), (1.0, 0.2, 0), (1.0, 0.8, 0), (0.4, 0.8, 0),
+           (1.4, 0.2, 0), (2.0, 0.2, 0), (2.0, 0.8, 0), (1.4, 0.8, 0)]
+    cloth.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*p) for p in pts]))
+    cloth.CreateFaceVertexCountsAttr([4, 4])
+    cloth.CreateFaceVertexIndicesAttr([0, 1, 2, 3, 7, 6, 5, 4])
+    cloth.CreateDoubleSidedAttr(True)
+    cloth.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    camera = UsdGeom.Camera.Define(stage, "/World/camera")
+    camera.AddTranslateOp().Set(Gf.Vec3d(*CAMERA_AT))
+    camera.CreateFocalLengthAttr(FOCAL)
+    camera.CreateHorizontalApertureAttr(H_APERTURE)
+    camera.CreateVerticalApertureAttr(V_APERTURE)
+    camera.CreateClippingRangeAttr(Gf.Vec2f(0.1, 100.0))
+    stage.GetRootLayer().Save()
+    return path
+
+
+def render(path: Path, frames: str = "1", camera: str = "/World/camera", size=(W, H)) -> np.ndarray:
+    from simbake.preview import Preview, parse_frames
+
+    preview = Preview(path, size, camera)
+    try:
+        chosen = parse_frames(frames, preview.start, preview.end, None)
+        return [image for _, image in preview.frames(chosen)][0]
+    finally:
+        preview.close()
+
+
+def is_grey(pixel) -> bool:
+    p = pixel.astype(int)
+    return p.max() - p.min() < 12
+
+
+def test_things_are_where_the_camera_maps_them(tmp_path):
+    from simbake.preview import SKY
+
+    image = render(write_stage(tmp_path / "stage.usda"))
+    assert image.shape == (H, W, 3)
+    # the box's front face (z = +0.5, facing the camera), at its centre: the box's own colour,
+    # neither sky nor ground
+    col, row = project(BOX_CENTER + [0, 0, BOX_SIZE / 2])
+    box = image[row, col]
+    assert not is_grey(box), box
+    # the ground in front of the box (lit or in shadow, its checks are grey) and the sky above
+    col, row = project([-1.2, 0.0, 2.5])
+    assert is_grey(image[row, col]) and image[row, col].min() > 60, image[row, col]
+    sky = np.round(np.array(SKY) * 255)
+    col, row = project([0.0, 2.6, 0.0])
+    assert np.abs(image[row, col].astype(int) - sky).max() <= 3, image[row, col]
+    # what is just beside the box is not the box
+    col, row = project(BOX_CENTER + [-BOX_SIZE, 0, 0])
+    assert np.abs(image[row, col].astype(int) - box.astype(int)).max() > 20
+
+
+def test_cloth_front_and_back_show_in_their_colours(tmp_path):
+    image = render(write_stage(tmp_path / "stage.usda"))
+    front = image[project([0.7, 0.5, 0.0])[::-1]].astype(int)
+    back = image[project([1.7, 0.5, 0.0])[::-1]].astype(int)
+    assert front[0] > front[1] > front[2] and front[0] - front[2] > 60, front  # orange
+    assert back[2] > back[1] > back[0] and back[2] - back[0] > 60, back        # blue
+
+
+def test_frame_label_is_burned_in(tmp_path):
+    stage = write_stage(tmp_path / "stage.usda")
+    labelled = render(stage, frames="2")
+    from simbake.preview import Preview
+
+    preview = Preview(stage, (W, H), "/World/camera")
+    try:
+        bare = next(iter(preview.frames([2], label=False)))[1]
+    finally:
+        preview.close()
+    corner = labelled[: H // 6, : W // 2].astype(int)
+    assert (corner.min(axis=2) > 230).sum() > 30   # white text
+    assert (corner.max(axis=2) < 40).sum() > 200   # on its dark box
+    # the label is the only difference: the rest of the picture is the same
+    assert np.array_equal(labelled[H // 4:], bare[H // 4:])
+    assert not np.array_equal(labelled[: H // 6, : W // 2], bare[: H // 6, : W // 2])
+
+
+def test_automatic_camera_sees_the_whole_animation(tmp_path):
+    from simbake.preview import Preview, auto_camera
+
+    stage = write_stage(tmp_path / "stage.usda")
+    preview = Preview(stage, (W, H))
+    lo, hi, _, _ = preview.frame_range([1, 2, 3])
+    cam = auto_camera(lo, hi, W / H)
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    clip = corners @ (cam.projection @ cam.view).T
+    ndc = clip[:, :3] / clip[:, 3:]
+    assert (np.abs(ndc[:, :2]) <= 1.0).all()          # every corner inside the picture
+    assert np.abs(ndc[:, :2]).max() > 0.8              # and the box fills it
+    preview.close()
+
+
+def test_movie_has_every_frame_at_the_cache_rate(tmp_path):
+    import imageio.v3 as iio
+    import imageio_ffmpeg
+
+    from simbake.preview import write_preview
+
+    stage = write_stage(tmp_path / "stage.usda", frames=12, fps=12.0)
+    out, count = write_preview(stage, tmp_path / "movie.mp4", size=(160, 90))
+    assert count == 12
+    frames, seconds = imageio_ffmpeg.count_frames_and_secs(str(out))
+    assert frames == 12 and seconds == pytest.approx(1.0, abs=0.05)
+    assert iio.immeta(out)["fps"] == pytest.approx(12.0)
+    first = next(iter(iio.imiter(out)))
+    assert first.shape == (90, 160, 3)
+    # every other frame: half the rate
+    out, count = write_preview(stage, tmp_path / "half.gif", frames="1:12:2", size=(160, 90))
+    assert count == 6
+    gif = list(iio.imiter(out))
+    assert len(gif) == 6
+    assert iio.immeta(out, index=0)["duration"] == pytest.approx(1000 / 6, abs=10)  # ms per frame
+
+
+def test_contact_sheet_holds_eight_evenly_spaced_frames(tmp_path):
+    from PIL import Image
+
+    from simbake.preview import parse_frames, write_preview
+
+    assert parse_frames(None, 1, 97, 8) == [1, 15, 28, 42, 56, 70, 83, 97]
+    assert parse_frames("10:20:5", 1, 97, 8) == [10, 15, 20]
+    stage = write_stage(tmp_path / "stage.usda", frames=20)
+    out, count = write_preview(stage, tmp_path / "sheet.png", size=(100, 60))
+    assert count == 8
+    assert Image.open(out).size == (4 * 100 + 5 * 4, 2 * 60 + 3 * 4)
+
+
+def run(*args, cwd: Path):
+    return subprocess.run([sys.executable, "-m", "simbake", *args], cwd=cwd, capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["missing.usdc"], "no such file"),
+    (["stage.usda", "--frames", "5:1"], "--frames"),
+    (["stage.usda", "--frames", "x"], "--frames"),
+    (["stage.usda", "--camera", "/World/box"], "not a Camera prim"),
+    (["stage.usda", "--size", "10x10"], "--size"),
+    (["stage.usda", "-o", "out.jpg"], "output must end in"),
+])
+def test_bad_preview_arguments_are_one_line_errors(tmp_path, args, problem):
+    write_stage(tmp_path / "stage.usda")
+    result = run("preview", *args, cwd=tmp_path)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("simbake: error:") and problem in lines[0], result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stage.usda"]
+
+
+def test_bake_with_preview_writes_movie_and_report(write_scene, tmp_path):
+    path = write_scene("""
+        [scene]
+        end_frame = 6
+        [ground]
+        [[bodies]]
+        name = "ball"
+        shape = { type = "sphere", radius = 0.2 }
+        position = [0.0, 1.0, 0.0]
+        [[cloths]]
+        name = "sheet"
+        grid = { size = [1.0, 1.0], resolution = [5, 5] }
+        position = [0.0, 2.0, 0.0]
+    """)
+    result = run("bake", str(path), "-o", "shot.usdc", "--preview", "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["scene.toml", "shot.mp4", "shot.qa.json", "shot.report.html", "shot.usdc"]
+    page = (tmp_path / "shot.report.html").read_text()
+    assert "clean: no figure over its threshold" in page and "data:image/png;base64," in page
+    # the report as a picture too
+    result = run("report", "shot.usdc", "-o", "page.png", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "page.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_report_names_the_warnings_and_needs_its_qa_data(write_scene, tmp_path):
+    path = write_scene(BOXES_ONE_CM_DEEP)
+    assert run("bake", str(path), "-o", "x.usdc", "-q", cwd=tmp_path).returncode == 0
+    assert run("report", "x.usdc", cwd=tmp_path).returncode == 0
+    page = (tmp_path / "x.report.html").read_text()
+    assert "1 warning(s)" in page and "deepest body penetration 10 mm (b into a) at frame 1" in page
+    (tmp_path / "x.qa.json").unlink()
+    result = run("report", "x.usdc", cwd=tmp_path)
+    assert result.returncode == 2 and "x.qa.json is missing" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
