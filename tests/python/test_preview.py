@@ -247,3 +247,68 @@ def test_report_names_the_warnings_and_needs_its_qa_data(write_scene, tmp_path):
     result = run("report", "x.usdc", cwd=tmp_path)
     assert result.returncode == 2 and "x.qa.json is missing" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_point_instancer_draws_each_instance_where_it_is(tmp_path):
+    # two instances of a unit cube prototype (its root moved up 0.5 m, included in the
+    # instance transforms), at x = -1.2 and x = +1.2: both show where the camera maps them,
+    # and nothing between them
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    path = tmp_path / "instanced.usda"
+    stage = Usd.Stage.Open(str(write_stage(path)))
+    stage.RemovePrim("/World/box")
+    stage.RemovePrim("/World/sheet")
+    instancer = UsdGeom.PointInstancer.Define(stage, "/World/boxes")
+    proto = UsdGeom.Xform.Define(stage, "/World/boxes/prototypes/cube")
+    proto.AddTranslateOp().Set(Gf.Vec3d(0, 0.5, 0))
+    cube = UsdGeom.Cube.Define(stage, "/World/boxes/prototypes/cube/shape")  # not a Mesh: not drawn
+    cube.CreateSizeAttr(0.1)
+    mesh = UsdGeom.Mesh.Define(stage, "/World/boxes/prototypes/cube/mesh")
+    h = 0.5
+    corners = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    mesh.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*c) for c in corners]))
+    mesh.CreateFaceVertexCountsAttr([4] * 6)
+    mesh.CreateFaceVertexIndicesAttr([i for q in quads for i in q])
+    instancer.CreatePrototypesRel().SetTargets([proto.GetPath()])
+    instancer.CreateProtoIndicesAttr([0, 0])
+    instancer.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(-1.2, 0, 0), Gf.Vec3f(1.2, 0, 0)]))
+    stage.GetRootLayer().Save()
+    image = render(path)
+    for x in (-1.2, 1.2):
+        for y in (0.15, 0.5, 0.85):  # the cube spans y 0..1 (its root's 0.5 m counted once)
+            col, row = project([x, y, 0.5])
+            assert not is_grey(image[row, col]), (x, y, image[row, col])
+        col, row = project([x, 1.15, 0.5])
+        assert is_grey(image[row, col]) or image[row, col].min() > 200
+    col, row = project([0.0, 0.5, 0.0])
+    assert is_grey(image[row, col]) or image[row, col].min() > 200  # ground or sky between them
+
+
+def test_z_up_stage_renders_as_its_y_up_twin(tmp_path):
+    # the same stage with every position turned to Z up (y -> z, z -> -y) and upAxis Z
+    from pxr import Gf, Usd, UsdGeom
+
+    y_up = render(write_stage(tmp_path / "y.usda"))
+    stage = Usd.Stage.Open(str(write_stage(tmp_path / "z.usda")))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    turn = Gf.Matrix4d().SetRotate(Gf.Rotation(Gf.Vec3d(1, 0, 0), 90))
+    y_stage = Usd.Stage.Open(str(tmp_path / "y.usda"))
+    for path in ("/World/box", "/World/camera"):
+        xform = UsdGeom.Xformable(stage.GetPrimAtPath(path))
+        xform.ClearXformOpOrder()
+        op = xform.AddTransformOp()
+        original = y_stage.GetPrimAtPath(path)
+        for t in (1.0, 2.0, 3.0):
+            local = UsdGeom.Xformable(original).GetLocalTransformation(t)
+            op.Set(local * turn, t)
+    sheet = UsdGeom.Mesh(stage.GetPrimAtPath("/World/sheet"))
+    sheet.GetPointsAttr().Set([Gf.Vec3f(p[0], -p[2], p[1]) for p in sheet.GetPointsAttr().Get()])
+    box_mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/box/mesh"))
+    box_mesh.GetPointsAttr().Set([Gf.Vec3f(p[0], -p[2], p[1]) for p in box_mesh.GetPointsAttr().Get()])
+    stage.GetRootLayer().Save()
+    z_up = render(tmp_path / "z.usda")
+    # the same picture, up to the rounding of the turned coordinates at a few edge pixels
+    differ = np.abs(z_up.astype(int) - y_up.astype(int)).max(axis=2) > 24
+    assert differ.mean() < 0.01, differ.mean()
