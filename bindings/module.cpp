@@ -194,7 +194,7 @@ PYBIND11_MODULE(_core, m) {
                            const std::string& model, double stretch_stiffness, double poisson_ratio,
                            double bend_stiffness, double damping, double strain_limit, const std::string& compression,
                            const std::vector<int>& pinned, const std::string& integrator, double friction,
-                           double thickness, double tolerance) {
+                           double thickness, double tolerance, bool self_collision) {
              ClothDesc d;
              d.rest = rest;
              d.triangles = triangles;
@@ -211,13 +211,14 @@ PYBIND11_MODULE(_core, m) {
              d.pinned = pinned;
              d.integrator = choose<ClothIntegrator>(integrator, {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}});
              d.tolerance = tolerance;
-             return w.add_cloth(d, friction, thickness);
+             return w.add_cloth(d, friction, thickness, self_collision);
            },
            py::arg("rest"), py::arg("triangles"), py::arg("area_density") = 0.1, py::arg("model") = "springs",
            py::arg("stretch_stiffness") = 1000.0, py::arg("poisson_ratio") = 0.3, py::arg("bend_stiffness") = 1e-4,
            py::arg("damping") = 0.01, py::arg("strain_limit") = 0.1, py::arg("compression") = "subgrid",
            py::arg("pinned") = std::vector<int>(), py::arg("integrator") = "implicit", py::arg("friction") = 0.3,
-           py::arg("thickness") = 0.005, py::arg("tolerance") = ClothDesc().tolerance)
+           py::arg("thickness") = 0.005, py::arg("tolerance") = ClothDesc().tolerance,
+           py::arg("self_collision") = true)
       .def_property_readonly("cloth_count", &World::cloth_count)
       .def("cloth_state", [](const World& w, int i) {
              if (i < 0 || i >= w.cloth_count()) throw py::index_error("cloth index out of range");
@@ -284,6 +285,13 @@ PYBIND11_MODULE(_core, m) {
              d["cloth_penetration"] = s.cloth_penetration;
              d["max_cloth_strain"] = s.max_cloth_strain;
              d["cloth_solver_iterations"] = s.cloth_solver_iterations;
+             d["self_repulsions"] = s.self_collision.repulsions;
+             d["self_collision_impulses"] = s.self_collision.collisions;
+             d["impact_zone_rounds"] = s.self_collision.zone_rounds;
+             d["impact_zone_vertices"] = s.self_collision.zone_vertices;
+             d["cloth_held_still"] = s.self_collision.stills;
+             d["self_collision_searches"] = s.self_collision.searches;
+             d["self_collision_candidates"] = s.self_collision.candidates;
              return d;
            })
       .def("quality", [](const World& w) {
@@ -321,6 +329,7 @@ PYBIND11_MODULE(_core, m) {
              d["positions"] = p.positions;
              d["sleeping"] = p.sleeping;
              d["cloths"] = p.cloths;
+             d["cloth_self_collision"] = p.cloth_self_collision;
              d["statistics"] = p.statistics;
              return d;
            });

@@ -15,6 +15,8 @@
 // positions.
 #include "world/world.h"
 
+#include "world/scoped_timer.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -25,12 +27,19 @@ constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per
 constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
 }  // namespace
 
-int World::add_cloth(const ClothDesc& desc, double friction, double thickness) {
+int World::add_cloth(const ClothDesc& desc, double friction, double thickness, bool self_collision) {
   if (!(friction >= 0.0 && std::isfinite(friction))) throw std::invalid_argument("cloth friction must be >= 0");
   if (!(thickness >= 0.0 && std::isfinite(thickness))) throw std::invalid_argument("cloth thickness must be >= 0");
-  cloths_.emplace_back(desc);
+  const Cloth& cloth = cloths_.emplace_back(desc);
   cloth_friction_.push_back(friction);
   cloth_thickness_.push_back(thickness);
+  Eigen::VectorXd inverse_mass = cloth.masses().cwiseInverse();
+  for (int k = 0; k < cloth.vertex_count(); ++k) {
+    if (cloth.pinned()[k]) inverse_mass[k] = 0.0;
+  }
+  cloth_inverse_mass_.push_back(inverse_mass);
+  cloth_self_.emplace_back();
+  if (self_collision) cloth_self_.back().emplace(cloth.triangles(), cloth.vertex_count());
   return cloth_count() - 1;
 }
 
@@ -38,15 +47,40 @@ void World::step_cloths(double dt) {
   if (!cloths_.empty()) ++stats_.cloth_steps;
   for (int c = 0; c < cloth_count(); ++c) {
     Cloth& cloth = cloths_[c];
+    std::optional<SelfCollision>& self = cloth_self_[c];
+    SelfCollisionSettings self_settings;
+    self_settings.thickness = cloth_thickness_[c];
+    self_settings.friction = cloth_friction_[c];
     cloth.update_velocities(dt, settings_.gravity);
     collide_cloth(c, dt);
-    // strain limiting and collisions in turn: a collision can stretch an edge the limiter
-    // just fixed, most of all at long steps; collisions have the last word
+    if (self) {
+      ScopedTimer timer(profile_.cloth_self_collision);
+      self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
+    }
+    // strain limiting, collisions with bodies and with itself in turn, until they agree: each
+    // can undo a little of what the others did (a collision stretches an edge the limiter
+    // fixed; an impulse against a layer pushes a vertex towards a body)
     const double limit = cloth.material().strain_limit;
     for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
       cloth.limit_strain(dt, pass == 0);
       collide_cloth(c, dt);
-      if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack)) break;
+      bool clear = true;
+      if (self) {
+        ScopedTimer timer(profile_.cloth_self_collision);
+        // layers the body contacts pressed into one plane (each at the thickness from the
+        // surface) are pushed apart again, the outer one outwards
+        self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
+        clear = self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
+                              stats_.self_collision, 1);
+      }
+      if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack))) break;
+    }
+    // the cloth against itself has the last word: rigid impact zones for what is left, so that
+    // nothing passes a layer through another
+    if (self) {
+      ScopedTimer timer(profile_.cloth_self_collision);
+      self->impact_zones(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
+                         stats_.self_collision);
     }
     cloth.update_positions(dt);
   }

@@ -2,6 +2,8 @@
 // The stages themselves are in rigid_stages.cpp.
 #include "world/world.h"
 
+#include "world/scoped_timer.h"
+
 #include <Eigen/Eigenvalues>
 #include <tbb/task_arena.h>
 
@@ -15,19 +17,6 @@
 namespace simbake {
 
 namespace {
-
-// Adds the wall time of its scope to a profile entry
-class ScopedTimer {
- public:
-  explicit ScopedTimer(double& total) : total_(total), start_(std::chrono::steady_clock::now()) {}
-  ~ScopedTimer() {
-    total_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
-
- private:
-  double& total_;
-  std::chrono::steady_clock::time_point start_;
-};
 
 void require(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument(what);

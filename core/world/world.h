@@ -24,6 +24,7 @@
 #pragma once
 
 #include "cloth/cloth.h"
+#include "cloth/self_collision.h"
 #include "geometry/mass_properties.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
@@ -91,6 +92,7 @@ struct StepStatistics {
   double max_cloth_strain = 0.0;   // largest edge strain of any cloth, last frame
   double potential_energy = 0.0;   // gravity, -m g.x (J), now
   long long impulses = 0;          // collision and contact impulses applied, in total
+  SelfCollisionStatistics self_collision;  // the cloths' self-collision work, in total
   bool finite = true;              // false once any state went NaN or infinite
 };
 
@@ -103,7 +105,8 @@ struct StageProfile {
   double shock_propagation = 0.0;
   double positions = 0.0;
   double sleeping = 0.0;
-  double cloths = 0.0;
+  double cloths = 0.0;             // all of the cloth step, self-collision included
+  double cloth_self_collision = 0.0;
   double statistics = 0.0;
 };
 
@@ -117,7 +120,7 @@ class World {
   int add_body(const BodyDesc& desc);
   // Adds a cloth that collides with every body and the ground with this friction and keeps
   // this thickness (m) from their surfaces; returns its index
-  int add_cloth(const ClothDesc& desc, double friction, double thickness);
+  int add_cloth(const ClothDesc& desc, double friction, double thickness, bool self_collision = true);
   int cloth_count() const { return static_cast<int>(cloths_.size()); }
   const Cloth& cloth(int i) const { return cloths_[i]; }
   Cloth& cloth(int i) { return cloths_[i]; }
@@ -251,7 +254,9 @@ class World {
   std::vector<int> island_;                 // (nbody) union-find parent; for sleepers, their island
   std::vector<Cloth> cloths_;               // (ncloth) cloths and their state
   std::vector<double> cloth_friction_;      // (ncloth) Coulomb coefficient against bodies and ground
-  std::vector<double> cloth_thickness_;     // (ncloth) distance kept from surfaces (m)
+  std::vector<double> cloth_thickness_;     // (ncloth) distance kept from surfaces and itself (m)
+  std::vector<std::optional<SelfCollision>> cloth_self_;  // (ncloth) self-collision, when on
+  std::vector<Eigen::VectorXd> cloth_inverse_mass_;       // (ncloth) (nvert) 1/kg, 0 when pinned
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages

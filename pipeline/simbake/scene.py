@@ -13,7 +13,8 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
     [[cloths]]  name (required), grid = { size = [w, d], resolution = [nx, nz] } or mesh = "...",
                 position, orientation, area_density, stretch_stiffness, bend_stiffness,
                 damping, strain_limit, compression, friction, thickness, pinned,
-                model (springs | membrane), poisson_ratio, integrator (implicit | explicit)
+                model (springs | membrane), poisson_ratio, integrator (implicit | explicit),
+                self_collision (true | false)
 
 The full reference, with defaults, is the section "Scene file (TOML), version 1" of
 DESIGN.md; the defaults here are the dataclass defaults below.
@@ -134,6 +135,7 @@ class Cloth:
     model: str = "springs"          # springs | membrane (StVK)
     poisson_ratio: float = 0.3      # membrane only
     integrator: str = "implicit"    # implicit (backward Euler) | explicit
+    self_collision: bool = True     # kept from passing through itself (at `thickness`)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -203,7 +205,7 @@ _ANY_SHAPE_KEYS = ("type", "radius", "size")
 _CLOTH_KEYS = (
     "name", "grid", "mesh", "position", "orientation", "area_density",
     "stretch_stiffness", "bend_stiffness", "damping", "strain_limit", "compression",
-    "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator",
+    "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator", "self_collision",
 )  # fmt: skip
 _GRID_KEYS = ("size", "resolution")
 
@@ -365,6 +367,7 @@ def _cloth(t: _Table, base_dir: Path) -> Cloth:
         model=t.string("model", Cloth.model, _one_of(CLOTH_MODELS)),
         poisson_ratio=t.number("poisson_ratio", Cloth.poisson_ratio, _poisson),
         integrator=t.string("integrator", Cloth.integrator, _one_of(CLOTH_INTEGRATORS)),
+        self_collision=t.boolean("self_collision", Cloth.self_collision),
     )
 
 

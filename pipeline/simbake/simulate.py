@@ -67,7 +67,8 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
             world.add_cloth(asset.vertices, asset.triangles, cloth.area_density, cloth.model,
                             cloth.stretch_stiffness, cloth.poisson_ratio, cloth.bend_stiffness,
                             cloth.damping, cloth.strain_limit, cloth.compression, list(cloth.pinned),
-                            cloth.integrator, cloth.friction, cloth.thickness)
+                            cloth.integrator, cloth.friction, cloth.thickness,
+                            self_collision=cloth.self_collision)
         except ValueError as error:
             raise SceneError(scene.source, f"cloths[{index}]", str(error)) from None
     return world
