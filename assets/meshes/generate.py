@@ -1,5 +1,6 @@
-"""Writes the shipped meshes (closed, consistently wound, origin at the centre): run it from
-anywhere with `python assets/meshes/generate.py`; the files are checked in."""
+"""Writes the shipped meshes (bodies: closed, consistently wound, origin at the centre; cloths:
+open sheets): run it from anywhere with `python assets/meshes/generate.py`; the files are
+checked in."""
 
 from pathlib import Path
 
@@ -77,12 +78,33 @@ def cube_sphere(radius: float, subdivisions: int):
     return np.array(vertices), np.array(faces)
 
 
+def twisted_sheet(width: float, length: float, nw: int, nl: int, turns: float):
+    """An open sheet twisted about its long (y) axis: a helicoid strip, `turns` whole turns
+    from bottom to top, centred on the origin; vertex (i across, j along) at j * nw + i."""
+    s = np.linspace(-width / 2, width / 2, nw)
+    t = np.linspace(-length / 2, length / 2, nl)
+    vertices = []
+    for y in t:
+        angle = 2 * np.pi * turns * (y + length / 2) / length
+        for x in s:
+            vertices.append((x * np.cos(angle), y, x * np.sin(angle)))
+    faces = []
+    for j in range(nl - 1):
+        for i in range(nw - 1):
+            a, b = j * nw + i, j * nw + i + 1
+            c, d = a + nw, b + nw
+            faces += [(a, c, d), (a, d, b)]
+    return np.array(vertices), np.array(faces)
+
+
 def main() -> None:
     write_obj(HERE / "torus.obj", *torus(0.3, 0.1, 32, 16))
     write_obj(HERE / "sphere.obj", *cube_sphere(0.2, 6))
     # an L of two 0.2 m thick legs, 0.6 m tall and 0.4 m wide, centred on its bounding box
     outline = np.array([(0.0, 0.0), (0.4, 0.0), (0.4, 0.2), (0.2, 0.2), (0.2, 0.6), (0.0, 0.6)])
     write_obj(HERE / "lshape.obj", *l_prism(outline - (0.2, 0.3), 0.2))
+    # a cloth for heap.toml: 1 m wide, 3 m long, one and a half turns
+    write_obj(HERE / "twisted_sheet.obj", *twisted_sheet(1.0, 3.0, 25, 73, 1.5))
 
 
 if __name__ == "__main__":

@@ -174,8 +174,25 @@ def cloth_demo() -> str:
     return text
 
 
+def heap() -> str:
+    text = header("A long cloth, twisted one and a half turns, dropped on end: it piles on the ground "
+                  "in many layers.", 121)
+    text += ('\n[[cloths]]\nname = "heap"\nmesh = "../meshes/twisted_sheet.obj"\n'
+             "position = [0, 1.75, 0]\nstretch_stiffness = 1000.0\nfriction = 0.4\n")
+    return text
+
+
+def towel_on_rod() -> str:
+    text = header("A towel dropped over a thin rod: it folds over it and its halves hang against each other.",
+                  97, friction=0.5)
+    text += body("rod", box((0.03, 0.03, 1.2)), (0, 1.2, 0), kinematic=True, friction=0.8)
+    text += cloth("towel", (1.2, 0.6), (48, 24), (0.04, 1.3, 0), friction=0.6, area_density=0.3,
+                  stretch_stiffness=1500.0)
+    return text
+
+
 def main() -> None:
-    for name, make in [("tower", tower), ("pyramid", pyramid), ("dominoes", dominoes), ("pile", pile),
+    for name, make in [("heap", heap), ("towel_on_rod", towel_on_rod), ("tower", tower), ("pyramid", pyramid), ("dominoes", dominoes), ("pile", pile),
                        ("ring_toss", ring_toss), ("drape", drape), ("flag", flag), ("tablecloth", tablecloth),
                        ("cape_on_mover", cape_on_mover), ("cloth_demo", cloth_demo)]:
         (HERE / f"{name}.toml").write_text(make())

@@ -458,11 +458,15 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
     first.max().array() += tolerance;
     if (!first.intersects(second)) return;
     // coplanarity: point and triangle (p0; p1 p2 p3) or the two edges (p0 p1; p2 p3)
-    double coef[4], roots[3];
+    double coef[4], roots[4];
     const Vec3 order[4] = {p[1], p[2], p[3], p[0]};
     const Vec3 motion[4] = {d[1], d[2], d[3], d[0]};
     coplanarity_cubic(order, motion, coef);
-    const int count = cubic_roots(coef[0], coef[1], coef[2], coef[3], roots);
+    int count = cubic_roots(coef[0], coef[1], coef[2], coef[3], roots);
+    // and the end of the step: a pair that ends closer than the tolerance collides too (a
+    // pair ending exactly in one plane, as two layers both pressed to a surface at the
+    // thickness do, has its root at 1 lost to round-off)
+    if (count == 0 || roots[count - 1] < 1.0) roots[count++] = 1.0;
     for (int r = 0; r < count; ++r) {
       const double s = roots[r];
       Vec3 q[4];

@@ -8,8 +8,10 @@
 //                                                  opposite signs,
 //   and passes inside abc                     iff  orient(p,q,a,b), orient(p,q,b,c),
 //                                                  orient(p,q,c,a) have one sign,
-// with orient(a,b,c,d) = (b-a) x (c-a) . (d-a). Touching (a volume exactly 0) and coplanar
-// overlap do not count: both have measure zero for a simulated cloth.
+// with orient(a,b,c,d) = (b-a) x (c-a) . (d-a). A volume within 1e-10 L^3 of zero (L the
+// longest edge of the two triangles) counts as zero: touching, coplanar triangles (two layers
+// pressed flat onto one face, where every volume is round-off) and crossings shallower than
+// about 1e-10 L do not count.
 //
 // Candidates come from a uniform grid (cell = the mean edge length) over the triangles'
 // boxes; a pair is tested only in the first cell its boxes share, so no pair is tested

@@ -25,6 +25,7 @@ namespace simbake {
 namespace {
 constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
 constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
 }  // namespace
 
 int World::add_cloth(const ClothDesc& desc, double friction, double thickness, bool self_collision) {
@@ -59,13 +60,14 @@ void World::step_cloths(double dt) {
     }
     // strain limiting, collisions with bodies and with itself in turn, until they agree: each
     // can undo a little of what the others did (a collision stretches an edge the limiter
-    // fixed; an impulse against a layer pushes a vertex towards a body)
+    // fixed; an impulse against a layer pushes a vertex towards a body). Self-collision takes
+    // part in the first few passes only (it costs most); what it leaves is small
     const double limit = cloth.material().strain_limit;
     for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
       cloth.limit_strain(dt, pass == 0);
       collide_cloth(c, dt);
       bool clear = true;
-      if (self) {
+      if (self && pass < kSelfCollisionPasses) {
         ScopedTimer timer(profile_.cloth_self_collision);
         // layers the body contacts pressed into one plane (each at the thickness from the
         // surface) are pushed apart again, the outer one outwards
@@ -75,12 +77,21 @@ void World::step_cloths(double dt) {
       }
       if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack))) break;
     }
-    // the cloth against itself has the last word: rigid impact zones for what is left, so that
+    // the cloth against itself has the last word: repulsions (the last body contacts may have
+    // pressed layers into one plane) and collision impulses, strain limiting once more on what
+    // they stretched, then collisions again and rigid impact zones for what is left, so that
     // nothing passes a layer through another
     if (self) {
       ScopedTimer timer(profile_.cloth_self_collision);
-      self->impact_zones(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
-                         stats_.self_collision);
+      self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
+      self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
+                    stats_.self_collision, 1);
+      cloth.limit_strain(dt, false);
+      if (!self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
+                         stats_.self_collision, 2)) {
+        self->impact_zones(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
+                           stats_.self_collision);
+      }
     }
     cloth.update_positions(dt);
   }
