@@ -2,17 +2,19 @@
 //
 // Each cloth computes its internal forces and new velocities itself (cloth/cloth.h). The
 // world then makes the candidate positions x + dt v respect every body and the ground: a
-// vertex whose candidate lies closer than the cloth's thickness to a surface (phi < h, with
-// phi the body's level set at its end-of-step pose) gets the normal velocity, relative to
-// the body's point velocity, that brings it exactly to distance h at the end of the step:
+// cloth point (each vertex, and each edge's quarter points, so that a pole or a box's edge
+// cannot slip between vertices) whose candidate lies closer than the cloth's thickness to a
+// surface (phi < h, with phi the body's level set at its end-of-step pose) gets the normal
+// velocity, relative to the body's point velocity, that brings it exactly to distance h at
+// the end of the step:
 //     dv_n = (h - phi) / dt   when positive (phi is taken at the candidate, so this is the
 //                              change that moves the candidate out to h: inelastic, no bounce)
 // and Coulomb friction on the relative tangential velocity, limited by that normal change
-// (Bridson, Fedkiw and Anderson 2002): v_T <- max(0, 1 - mu dv_n / |v_T|) v_T.
-// The vertex's momentum change goes, opposite, to a dynamic body at the contact point, so
-// cloth pushes bodies back. Strain limiting follows, then a second collision pass (strain
-// limiting may pull a vertex back into a body; collisions have the last word), then
-// positions.
+// (Bridson, Fedkiw and Anderson 2002): v_T <- max(0, 1 - mu dv_n / |v_T|) v_T. An edge
+// point's change is shared by its two vertices in proportion to their weights and inverse
+// masses. The cloth's momentum change goes, opposite, to a dynamic body at the contact point,
+// so cloth pushes bodies back. Strain limiting, contacts and self-collision then alternate
+// (see step_cloths), self-collision last, then positions.
 #include "world/world.h"
 
 #include "world/scoped_timer.h"
@@ -39,6 +41,16 @@ int World::add_cloth(const ClothDesc& desc, double friction, double thickness, b
     if (cloth.pinned()[k]) inverse_mass[k] = 0.0;
   }
   cloth_inverse_mass_.push_back(inverse_mass);
+  std::vector<std::array<int, 2>> edges;
+  for (Eigen::Index f = 0; f < cloth.triangles().rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int i = cloth.triangles()(f, k), j = cloth.triangles()(f, (k + 1) % 3);
+      edges.push_back({std::min(i, j), std::max(i, j)});
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  cloth_edges_.push_back(std::move(edges));
   cloth_self_.emplace_back();
   if (self_collision) cloth_self_.back().emplace(cloth.triangles(), cloth.vertex_count());
   return cloth_count() - 1;
@@ -115,29 +127,46 @@ void World::collide_cloth(int c, double dt) {
   reach.min().array() -= h;
   reach.max().array() += h;
 
-  // one contact: push the vertex out to distance h, friction on the relative slip, and the
-  // opposite momentum to the body (body < 0: the ground)
-  auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+  // one contact of a point of the cloth (a vertex, or a point along an edge: vertices `ids`
+  // with weights `w`): push the point out to distance h, friction on its relative slip,
+  // shared by its vertices in proportion to weight and inverse mass (pinned ones take none),
+  // and the opposite momentum to the body (body < 0: the ground)
+  const Eigen::VectorXd& inverse_mass = cloth_inverse_mass_[c];
+  auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc,
+                           const Vec3& normal, double phi, double mu) {
+    double denom = 0.0, weight = 0.0;
+    Vec3 point_velocity = Vec3::Zero();
+    for (int i = 0; i < count; ++i) {
+      denom += w[i] * w[i] * inverse_mass[ids[i]];
+      if (inverse_mass[ids[i]] > 0.0) weight += w[i];
+      point_velocity += w[i] * v.row(ids[i]).transpose();
+    }
+    if (denom <= 0.0) return;
     Vec3 body_velocity = Vec3::Zero();
     if (body >= 0) {
       const Vec3 omega = defs_[body].kinematic ? spin_[body] : angular_velocity(defs_[body], states_[body]);
       body_velocity = states_[body].v + omega.cross(xc - states_[body].x);
     }
-    const Vec3 vk = v.row(k).transpose();
-    const Vec3 relative = vk - body_velocity;
+    const Vec3 relative = point_velocity - body_velocity;
     const double vn = relative.dot(normal);
     const double dvn = (h - phi) / dt;
     if (dvn <= 0.0) return;
     Vec3 slip = relative - vn * normal;
     const double slip_speed = slip.norm();
     if (slip_speed > 0.0) slip *= std::max(0.0, 1.0 - mu * dvn / slip_speed);
-    const Vec3 change = (vn + dvn) * normal + slip - relative;
-    v.row(k) += change.transpose();
+    const Vec3 change = (vn + dvn) * normal + slip - relative;  // of the point's velocity
+    for (int i = 0; i < count; ++i) {
+      v.row(ids[i]) += (w[i] * inverse_mass[ids[i]] / denom) * change.transpose();
+    }
     if (body >= 0 && !defs_[body].kinematic && !asleep_[body]) {
-      const Vec3 J = mass[k] * change;  // the vertex's momentum change; the body takes -J
+      const Vec3 J = (weight / denom) * change;  // the cloth's momentum change; the body takes -J
       states_[body].v -= defs_[body].inverse_mass * J;
       states_[body].l -= (xc - states_[body].x).cross(J);
     }
+  };
+  auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+    const double one = 1.0;
+    contact_point(&k, &one, 1, body, xc, normal, phi, mu);
   };
 
   for (int b = 0; b < body_count(); ++b) {
@@ -163,6 +192,23 @@ void World::collide_cloth(int c, double dt) {
       if (phi >= h) continue;
       contact(k, b, xc, pose.rotation * n_local, phi, mu);
       touched = true;
+    }
+    // points along the edges (a pole or a box's edge between vertices), at their quarters
+    for (const auto& e : cloth_edges_[c]) {
+      if (pinned[e[0]] && pinned[e[1]]) continue;
+      const Vec3 a = (x.row(e[0]) + dt * v.row(e[0])).transpose();
+      const Vec3 d = (x.row(e[1]) + dt * v.row(e[1])).transpose() - a;
+      for (double s : {0.25, 0.5, 0.75}) {
+        const Vec3 xc = a + s * d;
+        const Vec3 p = pose.apply_inverse(xc);
+        if (!local.contains(p)) continue;
+        Vec3 n_local;
+        const double phi = def.shape->phi_and_normal(p, n_local);
+        if (phi >= h) continue;
+        const double w[2] = {1.0 - s, s};
+        contact_point(e.data(), w, 2, b, xc, pose.rotation * n_local, phi, mu);
+        touched = true;
+      }
     }
     if (touched && asleep_[b]) wake_island(b);
   }

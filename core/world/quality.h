@@ -23,7 +23,7 @@ struct ClothQuality {
   double max_strain = 0.0;               // largest edge strain |l| / L - 1
   long long self_intersections = 0;      // pairs of triangles sharing no vertex that cross
   PenetrationFigure vertex_penetration;  // deepest vertex inside a body or the ground (a = this cloth)
-  PenetrationFigure edge_penetration;    // deepest point along an edge (its quarter points), likewise
+  PenetrationFigure edge_penetration;    // deepest point along an edge (its eighths), likewise
 };
 
 struct FrameQuality {

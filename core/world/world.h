@@ -29,6 +29,7 @@
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -257,6 +258,7 @@ class World {
   std::vector<double> cloth_thickness_;     // (ncloth) distance kept from surfaces and itself (m)
   std::vector<std::optional<SelfCollision>> cloth_self_;  // (ncloth) self-collision, when on
   std::vector<Eigen::VectorXd> cloth_inverse_mass_;       // (ncloth) (nvert) 1/kg, 0 when pinned
+  std::vector<std::vector<std::array<int, 2>>> cloth_edges_;  // (ncloth) (nedge) vertex pairs, i < j
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages

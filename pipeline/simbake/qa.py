@@ -13,7 +13,7 @@ Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
   ground. The contact solver keeps resting contacts within 0.2 mm; 5 mm is ~5 pixels of a
   2 m wide shot at 1080p, where a render starts to show it.
 * ``cloth_penetration``: 1 mm past a body's or the ground's surface, at a cloth vertex or
-  an edge's quarter points (the cloth's thickness not counted): the cloth keeps its
+  an edge's eighths (the cloth's thickness not counted): the cloth keeps its
   thickness (5 mm by default) away from surfaces, so anything past the surface is a miss.
 * ``cloth_strain``: the cloth's ``strain_limit`` plus 1% of it (no threshold when 0).
 * ``cloth_self_intersections``: 0 crossing pairs of triangles (a layer through another).

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "test_support.h"
+#include "world/quality.h"
 
 using namespace simbake;
 using namespace simbake::test;
@@ -157,4 +158,27 @@ TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
     world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
     EXPECT_EQ(world.automatic_cloth_steps(frame), 21);
   }
+}
+
+TEST(ClothWorld, EdgesRestOnAThinRodBetweenVertices) {
+  // a coarse sheet (vertices 0.2 m apart) dropped across a 2 cm rod that lies between its
+  // vertices: only its edges can meet the rod. They hold it: after 1 s no point of the cloth
+  // is inside the rod and its edges' middles rest on the rod's top, a thickness above it
+  World world;
+  BodyDesc rod = test::box_body(Vec3(0.02, 0.02, 1.0), 1.0, Vec3(0.0, 1.0, 0.0));
+  rod.kinematic = true;
+  world.add_body(rod);
+  ClothDesc d = test::grid_cloth(2, 2, 0.2, 0.6, Vec3(-0.1, 1.05, -0.3));
+  d.material.bend_stiffness = 0.0;
+  const double thickness = 0.005;
+  world.add_cloth(d, 0.5, thickness);
+  for (int step = 0; step < 240; ++step) world.step(1.0 / 240.0);
+  const Points& x = world.cloth(0).positions();
+  const double middle = 0.25 * (x(0, 1) + x(1, 1) + x(2, 1) + x(3, 1));
+  EXPECT_GT(middle, 0.85);  // it hangs over the rod (its halves, 0.11 m, down from its top)
+  const ClothQuality q = cloth_quality(world, 0);
+  EXPECT_LT(q.edge_penetration.depth, 1e-3);
+  // the cross edges' middles sit on the rod's top at about the thickness
+  const double top = 0.5 * (x(0, 1) + x(1, 1));
+  EXPECT_GT(top, 1.01);
 }
