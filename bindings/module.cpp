@@ -329,6 +329,9 @@ PYBIND11_MODULE(_core, m) {
              d["positions"] = p.positions;
              d["sleeping"] = p.sleeping;
              d["cloths"] = p.cloths;
+             d["cloth_forces"] = p.cloth_forces;
+             d["cloth_contacts"] = p.cloth_contacts;
+             d["cloth_strain"] = p.cloth_strain;
              d["cloth_self_collision"] = p.cloth_self_collision;
              d["statistics"] = p.statistics;
              return d;

@@ -64,7 +64,10 @@ void World::step_cloths(double dt) {
     SelfCollisionSettings self_settings;
     self_settings.thickness = cloth_thickness_[c];
     self_settings.friction = cloth_friction_[c];
-    cloth.update_velocities(dt, settings_.gravity);
+    {
+      ScopedTimer timer(profile_.cloth_forces);
+      cloth.update_velocities(dt, settings_.gravity);
+    }
     collide_cloth(c, dt);
     if (self) {
       ScopedTimer timer(profile_.cloth_self_collision);
@@ -76,7 +79,10 @@ void World::step_cloths(double dt) {
     // part in the first few passes only (it costs most); what it leaves is small
     const double limit = cloth.material().strain_limit;
     for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
-      cloth.limit_strain(dt, pass == 0);
+      {
+        ScopedTimer timer(profile_.cloth_strain);
+        cloth.limit_strain(dt, pass == 0);
+      }
       collide_cloth(c, dt);
       bool clear = true;
       if (self && pass < kSelfCollisionPasses) {
@@ -98,7 +104,10 @@ void World::step_cloths(double dt) {
       self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
       self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
                     stats_.self_collision, 1);
-      cloth.limit_strain(dt, false);
+      {
+        ScopedTimer strain_timer(profile_.cloth_strain);
+        cloth.limit_strain(dt, false);
+      }
       if (!self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
                          stats_.self_collision, 2)) {
         self->impact_zones(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
@@ -110,6 +119,7 @@ void World::step_cloths(double dt) {
 }
 
 void World::collide_cloth(int c, double dt) {
+  ScopedTimer timer(profile_.cloth_contacts);
   Cloth& cloth = cloths_[c];
   const Points& x = cloth.positions();
   Points& v = cloth.velocities();

@@ -106,8 +106,11 @@ struct StageProfile {
   double shock_propagation = 0.0;
   double positions = 0.0;
   double sleeping = 0.0;
-  double cloths = 0.0;             // all of the cloth step, self-collision included
-  double cloth_self_collision = 0.0;
+  double cloths = 0.0;             // all of the cloth step; of which:
+  double cloth_forces = 0.0;       //   internal forces and the velocity update (the implicit solve)
+  double cloth_contacts = 0.0;     //   contacts with bodies and the ground
+  double cloth_strain = 0.0;       //   strain limiting
+  double cloth_self_collision = 0.0;  // self-collision
   double statistics = 0.0;
 };
 

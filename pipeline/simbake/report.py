@@ -66,7 +66,8 @@ def _settings_lines(qa: dict[str, Any]) -> list[str]:
         for b in bodies:
             kinds[b["shape"]["kind"]] = kinds.get(b["shape"]["kind"], 0) + 1
         kinematic = sum(1 for b in bodies if b["kinematic"])
-        lines.append(f"{len(bodies)} bodies: " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items()))
+        noun = "body" if len(bodies) == 1 else "bodies"
+        lines.append(f"{len(bodies)} {noun}: " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items()))
                      + (f" ({kinematic} kinematic)" if kinematic else ""))
     for c in s.get("cloths", []):
         res = c.get("grid_resolution")
@@ -160,14 +161,15 @@ def figure(cache: Path, qa: dict[str, Any]):
     plot(grid[2, 1], "wall time per frame (stepping)", [("", f["wall_seconds"], 1)], unit="s")
     # where the time went
     ax = fig.add_subplot(grid[2, 2:])
+    # the cloth_* entries are parts of "cloths": shown, not added again to the total
     stages = sorted(((v, k) for k, v in qa["profile"].items() if v > 0), reverse=True)
     names, seconds = [k for _, k in stages][::-1], [v for v, _ in stages][::-1]
-    ax.barh(names, seconds, color="#5c7fa3")
-    total = sum(seconds) or 1.0
+    ax.barh(names, seconds, color=["#9bb3cc" if k.startswith("cloth_") else "#5c7fa3" for k in names])
+    total = sum(v for v, k in stages if not k.startswith("cloth_")) or 1.0
     for y, v in enumerate(seconds):
         ax.text(v, y, f" {v:.2f} s ({v / total:.0%})", va="center", fontsize=8)
     ax.set_xlim(0, max(seconds, default=1.0) * 1.25)
-    ax.set_title("where the bake's time went (wall s per stage)", fontsize=11)
+    ax.set_title("where the bake's time went (wall s per stage; light: parts of cloths)", fontsize=11)
     ax.tick_params(labelsize=8)
     # the strip of frames
     if strip:
