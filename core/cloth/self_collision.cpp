@@ -1,5 +1,7 @@
 #include "cloth/self_collision.h"
 
+#include "geometry/mesh.h"
+
 #include <Eigen/Dense>
 #include <tbb/parallel_for.h>
 
@@ -21,6 +23,11 @@ constexpr double kMargin = 0.1;             // of the mean edge: how far motions
 constexpr size_t kChunk = 512;              // pairs per parallel task (fixed: same result at any thread count)
 
 Vec3 row(const Points& p, int k) { return p.row(k).transpose(); }
+
+// how close coplanar pairs count as colliding (m)
+double collision_tolerance(const SelfCollisionSettings& settings) {
+  return std::max(kCollisionTolerance * settings.thickness, 1e-9);
+}
 
 // Closest point of triangle abc to p, as barycentric weights (u, v, w) of a, b, c
 // (Ericson, Real-Time Collision Detection, 5.1.5)
@@ -343,18 +350,10 @@ class SelfCollision::Grid {
 
 
 SelfCollision::SelfCollision(const Triangles& triangles, int vertex_count)
-    : triangles_(triangles), vertex_count_(vertex_count) {
-  for (Eigen::Index f = 0; f < triangles.rows(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int i = triangles(f, k), j = triangles(f, (k + 1) % 3);
-      edges_.push_back({std::min(i, j), std::max(i, j)});
-    }
-  }
-  std::sort(edges_.begin(), edges_.end());
-  edges_.erase(std::unique(edges_.begin(), edges_.end()), edges_.end());
-}
+    : triangles_(triangles), edges_(unique_edges(triangles)), vertex_count_(vertex_count) {}
 
-const SelfCollision::Candidates& SelfCollision::candidates(const Points& x, const Points& v, double dt, double pad) {
+const SelfCollision::Candidates& SelfCollision::candidates(const Points& x, const Points& v, double dt, double pad,
+                                                          SelfCollisionStatistics& stats) {
   Candidates& c = candidates_;
   // still valid: the same start, a pad at least as large, motions within the margin
   if (c.pad >= pad && c.x.rows() == x.rows() && c.x == x) {
@@ -367,7 +366,10 @@ const SelfCollision::Candidates& SelfCollision::candidates(const Points& x, cons
   c.x = x;
   c.motion = dt * v;
   c.pad = pad;
-  c.margin = kMargin * mean_edge_;
+  double edge_sum = 0.0;
+  for (const auto& e : edges_) edge_sum += (row(x, e[0]) - row(x, e[1])).norm();
+  const double mean_edge = edges_.empty() ? 1.0 : edge_sum / edges_.size();
+  c.margin = kMargin * (mean_edge > 0.0 && std::isfinite(mean_edge) ? mean_edge : 1.0);
   c.point_triangle.clear();
   c.edge_edge.clear();
   const double grow = pad + c.margin;
@@ -390,17 +392,15 @@ const SelfCollision::Candidates& SelfCollision::candidates(const Points& x, cons
     const auto& b = edges_[f];
     return !(a[0] == b[0] || a[0] == b[1] || a[1] == b[0] || a[1] == b[1]);
   });
-  if (stats_) {
-    ++stats_->searches;
-    stats_->candidates += static_cast<long long>(c.point_triangle.size() + c.edge_edge.size());
-  }
+  ++stats.searches;
+  stats.candidates += static_cast<long long>(c.point_triangle.size() + c.edge_edge.size());
   return c;
 }
 
 void SelfCollision::proximity_contacts(const Points& x, const Points& v, double dt, double h,
-                                       std::vector<Contact>& out) {
+                                       std::vector<Contact>& out, SelfCollisionStatistics& stats) {
   out.clear();
-  const Candidates& c = candidates(x, v, dt, h);
+  const Candidates& c = candidates(x, v, dt, h, stats);
   parallel_collect(c.point_triangle.size(), out, [&](size_t n, std::vector<Contact>& found) {
     const auto [i, j] = c.point_triangle[n];
     const int a = triangles_(j, 0), b = triangles_(j, 1), d = triangles_(j, 2);
@@ -437,9 +437,9 @@ void SelfCollision::proximity_contacts(const Points& x, const Points& v, double 
 }
 
 void SelfCollision::collision_contacts(const Points& x, const Points& v, double dt, double tolerance,
-                                       std::vector<Contact>& out) {
+                                       std::vector<Contact>& out, SelfCollisionStatistics& stats) {
   out.clear();
-  const Candidates& cand = candidates(x, v, dt, tolerance);
+  const Candidates& cand = candidates(x, v, dt, tolerance, stats);
   const auto test = [&](int kind, const int ids[4], std::vector<Contact>& found) {
     Vec3 p[4], d[4];
     for (int k = 0; k < 4; ++k) {
@@ -517,13 +517,6 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
   });
 }
 
-void SelfCollision::measure_edges(const Points& x) {
-  double edge_sum = 0.0;
-  for (const auto& e : edges_) edge_sum += (row(x, e[0]) - row(x, e[1])).norm();
-  mean_edge_ = edges_.empty() ? 1.0 : edge_sum / edges_.size();
-  if (!(mean_edge_ > 0.0 && std::isfinite(mean_edge_))) mean_edge_ = 1.0;
-}
-
 void SelfCollision::resolve(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                             const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
   repel(x, v, inverse_mass, dt, settings, stats);
@@ -534,12 +527,10 @@ void SelfCollision::resolve(const Points& x, Points& v, const Eigen::VectorXd& i
 
 void SelfCollision::repel(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                           const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
-  stats_ = &stats;
   const double h = settings.thickness;
   if (!(h > 0.0)) return;
-  measure_edges(x);
   std::vector<Contact> contacts;
-  proximity_contacts(x, v, dt, h, contacts);
+  proximity_contacts(x, v, dt, h, contacts, stats);
   for (const Contact& c : contacts) {
     stats.repulsions += apply_impulse(c, kRepulsionRate * (h - c.distance) / dt, settings.friction, v, inverse_mass);
   }
@@ -547,14 +538,11 @@ void SelfCollision::repel(const Points& x, Points& v, const Eigen::VectorXd& inv
 
 bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                             const SelfCollisionSettings& settings, SelfCollisionStatistics& stats, int passes) {
-  stats_ = &stats;
-  measure_edges(x);
-  const double h = settings.thickness;
-  const double tolerance = std::max(kCollisionTolerance * h, 1e-9);
-  const double separation = kSeparation * h / dt;
+  const double tolerance = collision_tolerance(settings);
+  const double separation = kSeparation * settings.thickness / dt;
   std::vector<Contact> contacts;
   for (int pass = 0; pass < passes; ++pass) {
-    collision_contacts(x, v, dt, tolerance, contacts);
+    collision_contacts(x, v, dt, tolerance, contacts, stats);
     if (contacts.empty()) return true;
     for (const Contact& c : contacts) stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass);
   }
@@ -563,9 +551,7 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
 
 void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                                  const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
-  stats_ = &stats;
-  measure_edges(x);
-  const double tolerance = std::max(kCollisionTolerance * settings.thickness, 1e-9);
+  const double tolerance = collision_tolerance(settings);
   std::vector<Contact> contacts;
   // 3. rigid impact zones until nothing collides
   std::vector<int> parent(vertex_count_);
@@ -588,7 +574,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
                }), list.end());
   };
   for (int round = 0; round < settings.zone_iterations; ++round) {
-    collision_contacts(x, v, dt, tolerance, contacts);
+    collision_contacts(x, v, dt, tolerance, contacts, stats);
     outside_zones(contacts);
     if (contacts.empty()) return;
     ++stats.zone_rounds;
@@ -640,7 +626,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     }
   }
   // the last resort: nothing moves, and a cloth free of crossings stays free of them
-  collision_contacts(x, v, dt, tolerance, contacts);
+  collision_contacts(x, v, dt, tolerance, contacts, stats);
   outside_zones(contacts);
   if (contacts.empty()) return;
   ++stats.stills;

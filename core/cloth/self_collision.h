@@ -96,13 +96,12 @@ class SelfCollision {
   Triangles triangles_;
   std::vector<std::array<int, 2>> edges_;
   int vertex_count_;
-  double mean_edge_ = 0.0;
 
-  void measure_edges(const Points& x);
-  void proximity_contacts(const Points& x, const Points& v, double dt, double h, std::vector<Contact>& out);
-  void collision_contacts(const Points& x, const Points& v, double dt, double tolerance, std::vector<Contact>& out);
-  const Candidates& candidates(const Points& x, const Points& v, double dt, double pad);
-  SelfCollisionStatistics* stats_ = nullptr;  // of the call under way
+  void proximity_contacts(const Points& x, const Points& v, double dt, double h, std::vector<Contact>& out,
+                          SelfCollisionStatistics& stats);
+  void collision_contacts(const Points& x, const Points& v, double dt, double tolerance, std::vector<Contact>& out,
+                          SelfCollisionStatistics& stats);
+  const Candidates& candidates(const Points& x, const Points& v, double dt, double pad, SelfCollisionStatistics& stats);
 };
 
 }  // namespace simbake

@@ -93,20 +93,24 @@ TriangleMesh make_box_mesh(const Vec3& size, int subdivisions) {
                            [half](const Vec3& c) -> Vec3 { return c.cwiseProduct(half); });
 }
 
-Points surface_samples(const TriangleMesh& mesh, double max_spacing) {
-  if (!(max_spacing > 0.0)) throw std::invalid_argument("sample spacing must be > 0");
-  std::vector<std::pair<int, int>> edges;
-  edges.reserve(static_cast<std::size_t>(mesh.triangles.rows()) * 3);
-  for (Eigen::Index t = 0; t < mesh.triangles.rows(); ++t) {
+std::vector<std::array<int, 2>> unique_edges(const Triangles& triangles) {
+  std::vector<std::array<int, 2>> edges;
+  edges.reserve(static_cast<std::size_t>(triangles.rows()) * 3);
+  for (Eigen::Index t = 0; t < triangles.rows(); ++t) {
     for (int k = 0; k < 3; ++k) {
-      const int a = mesh.triangles(t, k), b = mesh.triangles(t, (k + 1) % 3);
-      edges.emplace_back(std::min(a, b), std::max(a, b));
+      const int a = triangles(t, k), b = triangles(t, (k + 1) % 3);
+      edges.push_back({std::min(a, b), std::max(a, b)});
     }
   }
   std::sort(edges.begin(), edges.end());
   edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  return edges;
+}
+
+Points surface_samples(const TriangleMesh& mesh, double max_spacing) {
+  if (!(max_spacing > 0.0)) throw std::invalid_argument("sample spacing must be > 0");
   std::vector<Vec3> extra;
-  for (const auto& [a, b] : edges) {
+  for (const auto& [a, b] : unique_edges(mesh.triangles)) {
     const Vec3 pa = mesh.vertices.row(a), pb = mesh.vertices.row(b);
     const int pieces = static_cast<int>(std::ceil((pb - pa).norm() / max_spacing));
     for (int k = 1; k < pieces; ++k) extra.push_back(pa + (pb - pa) * (double(k) / pieces));

@@ -3,6 +3,9 @@
 
 #include "math/types.h"
 
+#include <array>
+#include <vector>
+
 namespace simbake {
 
 struct TriangleMesh {
@@ -28,6 +31,9 @@ TriangleMesh make_box_mesh(const Vec3& size, int subdivisions);
 // apart along every edge longer than that (so that a coarse mesh's edges can still catch
 // another body's level set), in a deterministic order (edges sorted by vertex indices).
 Points surface_samples(const TriangleMesh& mesh, double max_spacing);
+
+// Every edge of the triangles once, as (i, j) with i < j, sorted
+std::vector<std::array<int, 2>> unique_edges(const Triangles& triangles);
 
 // True when every edge is shared by exactly two triangles with opposite orientation
 bool is_closed(const TriangleMesh& mesh);

@@ -17,6 +17,7 @@
 // (see step_cloths), self-collision last, then positions.
 #include "world/world.h"
 
+#include "geometry/mesh.h"
 #include "world/scoped_timer.h"
 
 #include <algorithm>
@@ -41,16 +42,7 @@ int World::add_cloth(const ClothDesc& desc, double friction, double thickness, b
     if (cloth.pinned()[k]) inverse_mass[k] = 0.0;
   }
   cloth_inverse_mass_.push_back(inverse_mass);
-  std::vector<std::array<int, 2>> edges;
-  for (Eigen::Index f = 0; f < cloth.triangles().rows(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int i = cloth.triangles()(f, k), j = cloth.triangles()(f, (k + 1) % 3);
-      edges.push_back({std::min(i, j), std::max(i, j)});
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-  cloth_edges_.push_back(std::move(edges));
+  cloth_edges_.push_back(unique_edges(cloth.triangles()));
   cloth_self_.emplace_back();
   if (self_collision) cloth_self_.back().emplace(cloth.triangles(), cloth.vertex_count());
   return cloth_count() - 1;
@@ -64,34 +56,41 @@ void World::step_cloths(double dt) {
     SelfCollisionSettings self_settings;
     self_settings.thickness = cloth_thickness_[c];
     self_settings.friction = cloth_friction_[c];
+    const Eigen::VectorXd& inverse_mass = cloth_inverse_mass_[c];
+    // the sub-stages, each timed into its own profile entry
+    const auto limit_strain = [&](bool global) {
+      ScopedTimer timer(profile_.cloth_strain);
+      cloth.limit_strain(dt, global);
+    };
+    const auto repel = [&] {
+      ScopedTimer timer(profile_.cloth_self_collision);
+      self->repel(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings, stats_.self_collision);
+    };
+    const auto collide_self = [&](int passes) {
+      ScopedTimer timer(profile_.cloth_self_collision);
+      return self->collide(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
+                           stats_.self_collision, passes);
+    };
     {
       ScopedTimer timer(profile_.cloth_forces);
       cloth.update_velocities(dt, settings_.gravity);
     }
     collide_cloth(c, dt);
-    if (self) {
-      ScopedTimer timer(profile_.cloth_self_collision);
-      self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
-    }
+    if (self) repel();
     // strain limiting, collisions with bodies and with itself in turn, until they agree: each
     // can undo a little of what the others did (a collision stretches an edge the limiter
     // fixed; an impulse against a layer pushes a vertex towards a body). Self-collision takes
     // part in the first few passes only (it costs most); what it leaves is small
     const double limit = cloth.material().strain_limit;
     for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
-      {
-        ScopedTimer timer(profile_.cloth_strain);
-        cloth.limit_strain(dt, pass == 0);
-      }
+      limit_strain(pass == 0);
       collide_cloth(c, dt);
       bool clear = true;
       if (self && pass < kSelfCollisionPasses) {
-        ScopedTimer timer(profile_.cloth_self_collision);
         // layers the body contacts pressed into one plane (each at the thickness from the
         // surface) are pushed apart again, the outer one outwards
-        self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
-        clear = self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
-                              stats_.self_collision, 1);
+        repel();
+        clear = collide_self(1);
       }
       if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack))) break;
     }
@@ -100,17 +99,12 @@ void World::step_cloths(double dt) {
     // they stretched, then collisions again and rigid impact zones for what is left, so that
     // nothing passes a layer through another
     if (self) {
-      ScopedTimer timer(profile_.cloth_self_collision);
-      self->repel(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings, stats_.self_collision);
-      self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
-                    stats_.self_collision, 1);
-      {
-        ScopedTimer strain_timer(profile_.cloth_strain);
-        cloth.limit_strain(dt, false);
-      }
-      if (!self->collide(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
-                         stats_.self_collision, 2)) {
-        self->impact_zones(cloth.positions(), cloth.velocities(), cloth_inverse_mass_[c], dt, self_settings,
+      repel();
+      collide_self(1);
+      limit_strain(false);
+      if (!collide_self(2)) {
+        ScopedTimer timer(profile_.cloth_self_collision);
+        self->impact_zones(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
                            stats_.self_collision);
       }
     }
@@ -123,7 +117,6 @@ void World::collide_cloth(int c, double dt) {
   Cloth& cloth = cloths_[c];
   const Points& x = cloth.positions();
   Points& v = cloth.velocities();
-  const Eigen::VectorXd& mass = cloth.masses();
   const std::vector<char>& pinned = cloth.pinned();
   const double h = cloth_thickness_[c];
   const int n = cloth.vertex_count();

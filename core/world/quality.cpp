@@ -28,21 +28,6 @@ void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses
   }
 }
 
-// Every edge of the triangles once, (i, j) with i < j, sorted
-std::vector<std::pair<int, int>> unique_edges(const Triangles& t) {
-  std::vector<std::pair<int, int>> edges;
-  edges.reserve(3 * static_cast<size_t>(t.rows()));
-  for (Eigen::Index f = 0; f < t.rows(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int i = t(f, k), j = t(f, (k + 1) % 3);
-      edges.emplace_back(std::min(i, j), std::max(i, j));
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-  return edges;
-}
-
 }  // namespace
 
 PenetrationFigure body_penetration(const World& w) {
@@ -112,7 +97,7 @@ ClothQuality cloth_quality(const World& w, int c) {
     }
   };
   for (Eigen::Index k = 0; k < x.rows(); ++k) probe(x.row(k).transpose(), q.vertex_penetration);
-  for (const auto& [i, j] : unique_edges(cloth.triangles())) {
+  for (const auto& [i, j] : w.cloth_edges(c)) {
     const Vec3 a = x.row(i).transpose(), b = x.row(j).transpose();
     // eighths: finer than the cloth's own edge contacts (quarters), so the figure judges them
     for (int k = 1; k < 8; ++k) probe(a + (k / 8.0) * (b - a), q.edge_penetration);

@@ -128,6 +128,8 @@ class World {
   int cloth_count() const { return static_cast<int>(cloths_.size()); }
   const Cloth& cloth(int i) const { return cloths_[i]; }
   Cloth& cloth(int i) { return cloths_[i]; }
+  // the edges of cloth i, (j, k) with j < k, sorted
+  const std::vector<std::array<int, 2>>& cloth_edges(int i) const { return cloth_edges_[i]; }
   // Makes kinematic body i follow a key track from now on (time 0 is when the world starts)
   void set_kinematic_track(int i, KinematicTrack track);
   double time() const { return time_; }  // (s) simulated so far

@@ -52,17 +52,6 @@ CLOTH_PENETRATION = 1e-3      # (m)
 STRAIN_MARGIN = 0.01          # of the strain limit
 MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
 
-# figure -> (label, unit, how its value is shown)
-FIGURES = {
-    "body_penetration": ("deepest body penetration", "mm", 1e3),
-    "cloth_penetration": ("deepest cloth penetration", "mm", 1e3),
-    "cloth_strain": ("largest cloth strain", "%", 1e2),
-    "cloth_self_intersections": ("cloth self-intersections", "pairs", 1),
-    "kinetic_energy": ("kinetic energy", "J", 1),
-    "substeps": ("substeps", "", 1),
-    "wall_seconds": ("wall time", "s", 1),
-}
-
 
 def qa_path(cache: str | Path) -> Path:
     """The sidecar of a cache: out.usdc -> out.qa.json."""
@@ -187,13 +176,14 @@ class QualityRecorder:
     def layer_summary(self) -> dict[str, Any]:
         """What goes into the cache's customLayerData["simbake"]["qa"]: worst values and frames."""
         out: dict[str, Any] = {"sidecar_version": QA_VERSION}
-        for name, s in self.summary().items():
+        summary = self.summary()
+        for name, s in summary.items():
             if name == "wall_seconds":
                 continue  # differs run to run: the cache must not (same scene, same bytes)
             out[name] = {"worst": s["worst"], "frame": s["frame"]}
             if s["first_over"] is not None:
                 out[name]["first_over"] = s["first_over"]
-        out["warnings"] = sum(1 for s in self.summary().values() if s["first_over"] is not None)
+        out["warnings"] = sum(1 for s in summary.values() if s["first_over"] is not None)
         return out
 
     def as_dict(self, cache: Path, profile: dict[str, float]) -> dict[str, Any]:

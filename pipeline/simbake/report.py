@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import SceneError
 from .files import check_output_path, write_atomically
-from .qa import CLOTH_PENETRATION, qa_path
+from .qa import BODY_PENETRATION, CLOTH_PENETRATION, STRAIN_MARGIN, qa_path
 
 OUTPUT_SUFFIXES = (".html", ".png")
 STRIP_FRAMES = 6
@@ -228,8 +228,8 @@ padding:2px 8px;text-align:right}} td:first-child{{text-align:left}} img{{max-wi
 <h2>Worst values</h2><table><tr><th>figure</th><th>worst</th><th>at frame</th><th>threshold</th>
 <th>first frame over</th></tr>{rows}</table>
 <h2>Scene</h2><ul>{settings}</ul>
-<p>QA data: {e(qa_path(cache).name)}; thresholds: simbake.qa (body penetration 5 mm, cloth
-{CLOTH_PENETRATION * 1e3:g} mm past a surface, strain limit + 1%, no self-intersection).</p>
+<p>QA data: {e(qa_path(cache).name)}; thresholds: simbake.qa (body penetration {BODY_PENETRATION * 1e3:g} mm,
+cloth {CLOTH_PENETRATION * 1e3:g} mm past a surface, strain limit + {STRAIN_MARGIN:.0%}, no self-intersection).</p>
 </body></html>
 """
 
