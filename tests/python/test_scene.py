@@ -186,6 +186,13 @@ def test_single_frame_and_cloth_mesh(in_tmp):
     assert flag.pinned == (1000,)  # a mesh's vertex count is not known here
 
 
+def test_cloth_self_collision_is_on_unless_turned_off(in_tmp):
+    write(in_tmp / "on.toml", cloth(""))
+    write(in_tmp / "off.toml", cloth("self_collision = false"))
+    assert load_scene("on.toml").cloths[0].self_collision is True
+    assert load_scene("off.toml").cloths[0].self_collision is False
+
+
 def test_result_is_frozen(in_tmp):
     write(in_tmp / "full.toml", FULL_SCENE)
     scene = load_scene("full.toml")
@@ -388,6 +395,7 @@ BAD_CASES = [
     ("cloth-unknown-model", cloth('model = "fem"'), "cloths[0].model", "one of"),
     ("cloth-bad-poisson", cloth("poisson_ratio = 0.5"), "cloths[0].poisson_ratio", "[0, 0.5)"),
     ("cloth-unknown-integrator", cloth('integrator = "rk4"'), "cloths[0].integrator", "one of"),
+    ("cloth-self-collision-not-bool", cloth('self_collision = "yes"'), "cloths[0].self_collision", "true or false"),
     # keyed kinematic bodies
     ("keys-on-dynamic-body", body("keys = [{ time = 0.0 }]"), "bodies[0].keys", "kinematic"),
     ("keys-not-increasing", body("kinematic = true\nkeys = [{ time = 1.0 }, { time = 1.0 }]"),
