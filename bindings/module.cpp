@@ -1,6 +1,12 @@
 // simbake._core: a thin layer over the C++ core. Converts numpy arrays to Eigen and back,
 // releases the GIL while the world steps, and turns C++ exceptions into Python ones
 // (std::invalid_argument -> ValueError, std::runtime_error -> RuntimeError). No physics here.
+// Every index and number a method takes is checked here before it reaches the core (which
+// trusts its callers): a bad index is IndexError, a bad number ValueError, never a crash.
+#include <cmath>
+#include <cstdio>
+#include <string>
+
 #include <pybind11/eigen.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -50,6 +56,30 @@ MassProperties mass_from_dict(const py::dict& d) {
   return m;
 }
 
+// `i` as an index into `count` items (negative indices are not Python-style here), or IndexError
+int checked_index(long long i, int count, const char* what) {
+  if (i < 0 || i >= count) {
+    throw py::index_error(std::string(what) + " index " + std::to_string(i) + " out of range (there are " +
+                          std::to_string(count) + ")");
+  }
+  return static_cast<int>(i);
+}
+
+// `x` when it is finite and > 0, or ValueError naming it
+double positive(double x, const char* name) {
+  if (!(x > 0.0 && std::isfinite(x))) {
+    char shown[32];
+    std::snprintf(shown, sizeof shown, "%g", x);
+    throw std::invalid_argument(std::string(name) + " must be a finite number > 0, got " + shown);
+  }
+  return x;
+}
+
+const Vec3& positive(const Vec3& v, const char* name) {
+  for (int k = 0; k < 3; ++k) positive(v[k], name);
+  return v;
+}
+
 Quat quat_wxyz(const Eigen::Vector4d& q) { return Quat(q[0], q[1], q[2], q[3]); }
 
 // The enum value named by `name`, or ValueError listing the choices
@@ -70,9 +100,9 @@ PYBIND11_MODULE(_core, m) {
   m.attr("__version__") = SIMBAKE_VERSION;
 
   // geometry
-  m.def("sphere_mesh", [](double r, int s) { return mesh_tuple(make_sphere_mesh(r, s)); },
+  m.def("sphere_mesh", [](double r, int s) { return mesh_tuple(make_sphere_mesh(positive(r, "radius"), s)); },
         py::arg("radius"), py::arg("subdivisions"));
-  m.def("box_mesh", [](const Vec3& size, int s) { return mesh_tuple(make_box_mesh(size, s)); },
+  m.def("box_mesh", [](const Vec3& size, int s) { return mesh_tuple(make_box_mesh(positive(size, "size"), s)); },
         py::arg("size"), py::arg("subdivisions"));
   m.def("vertex_normals", [](const Points& v, const Triangles& t) { return vertex_normals(to_mesh(v, t)); },
         py::arg("vertices"), py::arg("triangles"));
@@ -96,13 +126,13 @@ PYBIND11_MODULE(_core, m) {
         py::arg("vertices"), py::arg("triangles"));
   m.def("mass_properties", [](const Points& v, const Triangles& t) { return mass_dict(mass_properties(to_mesh(v, t))); },
         py::arg("vertices"), py::arg("triangles"));
-  m.def("sphere_mass_properties", [](double r) { return mass_dict(sphere_mass_properties(r)); }, py::arg("radius"));
-  m.def("box_mass_properties", [](const Vec3& s) { return mass_dict(box_mass_properties(s)); }, py::arg("size"));
+  m.def("sphere_mass_properties", [](double r) { return mass_dict(sphere_mass_properties(positive(r, "radius"))); }, py::arg("radius"));
+  m.def("box_mass_properties", [](const Vec3& s) { return mass_dict(box_mass_properties(positive(s, "size"))); }, py::arg("size"));
 
   // level sets
   py::class_<LevelSet>(m, "LevelSet")
-      .def_static("sphere", [](double r) { return LevelSet{std::make_shared<SphereDistance>(r), nullptr}; })
-      .def_static("box", [](const Vec3& size) { return LevelSet{std::make_shared<BoxDistance>(size), nullptr}; })
+      .def_static("sphere", [](double r) { return LevelSet{std::make_shared<SphereDistance>(positive(r, "radius")), nullptr}; })
+      .def_static("box", [](const Vec3& size) { return LevelSet{std::make_shared<BoxDistance>(positive(size, "size")), nullptr}; })
       .def_static("bake", [](const Points& v, const Triangles& t, double voxel_size) {
             to_mesh(v, t);
             std::shared_ptr<VdbLevelSet> grid;
@@ -154,7 +184,9 @@ PYBIND11_MODULE(_core, m) {
              s.travel_fraction = travel_fraction;
              s.max_substeps = max_substeps;
              s.threads = threads;
-             s.cloth_max_substep = cloth_max_substep;
+             s.cloth_max_substep = positive(cloth_max_substep, "cloth_max_substep");
+             positive(max_substep, "max_substep");
+             positive(travel_fraction, "travel_fraction");
              return World(s);
            }),
            py::arg("gravity") = WorldSettings().gravity,
@@ -220,17 +252,19 @@ PYBIND11_MODULE(_core, m) {
            py::arg("thickness") = 0.005, py::arg("tolerance") = ClothDesc().tolerance,
            py::arg("self_collision") = true)
       .def_property_readonly("cloth_count", &World::cloth_count)
-      .def("cloth_state", [](const World& w, int i) {
-             if (i < 0 || i >= w.cloth_count()) throw py::index_error("cloth index out of range");
-             const Cloth& c = w.cloth(i);
+      .def("cloth_state", [](const World& w, long long i) {
+             const Cloth& c = w.cloth(checked_index(i, w.cloth_count(), "cloth"));
              return py::make_tuple(c.positions(), c.velocities(), c.vertex_normals());
            }, py::arg("index"), "Positions (n, 3), velocities (n, 3) and vertex normals (n, 3) of cloth i")
-      .def("cloth_max_strain", [](const World& w, int i) { return w.cloth(i).max_strain(); }, py::arg("index"))
-      .def("set_kinematic_track", [](World& w, int i, const std::vector<double>& times, const Points& origins,
+      .def("cloth_max_strain", [](const World& w, long long i) {
+             return w.cloth(checked_index(i, w.cloth_count(), "cloth")).max_strain();
+           }, py::arg("index"))
+      .def("set_kinematic_track", [](World& w, long long index, const std::vector<double>& times, const Points& origins,
                                       const Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>& orientations) {
              if (origins.rows() != static_cast<Eigen::Index>(times.size()) || orientations.rows() != origins.rows()) {
                throw std::invalid_argument("keys need one position and one orientation per time");
              }
+             const int i = checked_index(index, w.body_count(), "body");
              std::vector<Vec3> o;
              std::vector<Quat> q;
              for (Eigen::Index k = 0; k < origins.rows(); ++k) {
@@ -240,11 +274,23 @@ PYBIND11_MODULE(_core, m) {
              w.set_kinematic_track(i, KinematicTrack(times, o, q));
            }, py::arg("index"), py::arg("times"), py::arg("positions"), py::arg("orientations"),
            "Keyed kinematic body: mesh-origin positions (n, 3) and orientations (n, 4) [w, x, y, z] at times (s)")
-      .def("step_frame", &World::step_frame, py::arg("frame_dt"), py::arg("substeps") = 0,
-           py::call_guard<py::gil_scoped_release>())
-      .def("step", &World::step, py::arg("dt"), py::call_guard<py::gil_scoped_release>())
-      .def("automatic_substeps", &World::automatic_substeps, py::arg("frame_dt"))
-      .def("automatic_cloth_steps", &World::automatic_cloth_steps, py::arg("frame_dt"))
+      .def("step_frame", [](World& w, double frame_dt, int substeps) {
+             positive(frame_dt, "frame_dt");
+             if (substeps < 0) throw std::invalid_argument("substeps must be >= 0 (0 = automatic), got " + std::to_string(substeps));
+             py::gil_scoped_release release;
+             return w.step_frame(frame_dt, substeps);
+           }, py::arg("frame_dt"), py::arg("substeps") = 0)
+      .def("step", [](World& w, double dt) {
+             positive(dt, "dt");
+             py::gil_scoped_release release;
+             w.step(dt);
+           }, py::arg("dt"))
+      .def("automatic_substeps", [](const World& w, double frame_dt) {
+             return w.automatic_substeps(positive(frame_dt, "frame_dt"));
+           }, py::arg("frame_dt"))
+      .def("automatic_cloth_steps", [](const World& w, double frame_dt) {
+             return w.automatic_cloth_steps(positive(frame_dt, "frame_dt"));
+           }, py::arg("frame_dt"))
       .def_property_readonly("body_count", &World::body_count)
       .def("mesh_poses", [](const World& w) {
              Points translations(w.body_count(), 3);
@@ -257,8 +303,8 @@ PYBIND11_MODULE(_core, m) {
              }
              return py::make_tuple(translations, orientations);
            }, "World pose of each body's mesh origin: translations (n, 3), orientations (n, 4) [w, x, y, z]")
-      .def("body_state", [](const World& w, int i) {
-             if (i < 0 || i >= w.body_count()) throw py::index_error("body index out of range");
+      .def("body_state", [](const World& w, long long index) {
+             const int i = checked_index(index, w.body_count(), "body");
              const RigidBodyState& s = w.body_state(i);
              py::dict d;
              d["center_of_mass"] = s.x;
@@ -268,7 +314,8 @@ PYBIND11_MODULE(_core, m) {
              d["angular_velocity"] = angular_velocity(w.body_def(i), s);
              return d;
            }, py::arg("index"))
-      .def("asleep", &World::asleep, py::arg("index"))
+      .def("asleep", [](const World& w, long long i) { return w.asleep(checked_index(i, w.body_count(), "body")); },
+           py::arg("index"))
       .def_property_readonly("sleeping_count", &World::sleeping_count)
       .def_property_readonly("time", &World::time)
       .def("statistics", [](const World& w) {

@@ -1,0 +1,100 @@
+"""The bindings check every index and number before it reaches the core (issue 10).
+
+The core trusts its callers; simbake._core is the boundary where Python's values come in.
+A bad index must be IndexError and a bad number ValueError: never a segfault, never an
+answer read from someone else's memory. Each call runs in this process: a crash here would
+take the test run down with it, which is the failure these tests exist to catch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from simbake import _core
+
+
+def one_body_world() -> "_core.World":
+    world = _core.World()
+    vertices, _ = _core.box_mesh(np.array([1.0, 1.0, 1.0]), 1)
+    world.add_body(_core.LevelSet.box(np.array([1.0, 1.0, 1.0])), vertices,
+                   _core.box_mass_properties(np.array([1.0, 1.0, 1.0])), 1.0,
+                   np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))
+    return world
+
+
+def one_cloth_world() -> "_core.World":
+    world = _core.World()
+    rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    world.add_cloth(rest, np.array([[0, 2, 1]], dtype=np.int32))
+    return world
+
+
+BAD_INDICES = [1, 99, 10**6, -1, -5, 2**40]
+
+
+@pytest.mark.parametrize("index", BAD_INDICES)
+@pytest.mark.parametrize("method, world, what", [
+    ("asleep", one_body_world, "body"),
+    ("body_state", one_body_world, "body"),
+    ("cloth_max_strain", one_cloth_world, "cloth"),
+    ("cloth_state", one_cloth_world, "cloth"),
+])
+def test_index_out_of_range_is_index_error(method, world, what, index):
+    with pytest.raises(IndexError, match=f"{what} index {index} out of range"):
+        getattr(world(), method)(index)
+
+
+def test_valid_indices_still_answer():
+    world = one_body_world()
+    assert world.asleep(0) is False
+    assert world.body_state(0)["center_of_mass"].shape == (3,)
+    cloth = one_cloth_world()
+    assert cloth.cloth_max_strain(0) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_kinematic_track_index_is_checked():
+    world = one_body_world()
+    with pytest.raises(IndexError, match="body index"):
+        world.set_kinematic_track(7, [0.0], np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0, 0.0]]))
+
+
+@pytest.mark.parametrize("dt", [-1.0, 0.0, math.nan, math.inf, -math.inf])
+def test_step_needs_a_positive_finite_dt(dt):
+    world = one_body_world()
+    with pytest.raises(ValueError, match="dt must be a finite number > 0"):
+        world.step(dt)
+    with pytest.raises(ValueError, match="frame_dt"):
+        world.step_frame(dt)
+    with pytest.raises(ValueError, match="frame_dt"):
+        world.automatic_substeps(dt)
+    with pytest.raises(ValueError, match="frame_dt"):
+        world.automatic_cloth_steps(dt)
+    assert world.time == 0.0  # nothing was stepped
+
+
+def test_step_frame_rejects_negative_substeps():
+    world = one_body_world()
+    with pytest.raises(ValueError, match="substeps must be >= 0"):
+        world.step_frame(1 / 24, -5)
+    assert world.time == 0.0
+    assert world.step_frame(1 / 24, 2) == 2  # a good call still steps
+
+
+@pytest.mark.parametrize("call", [
+    lambda: _core.sphere_mesh(-1.0, 4),
+    lambda: _core.sphere_mesh(math.nan, 4),
+    lambda: _core.box_mesh(np.array([1.0, -1.0, 1.0]), 1),
+    lambda: _core.sphere_mass_properties(math.inf),
+    lambda: _core.box_mass_properties(np.array([0.0, 1.0, 1.0])),
+    lambda: _core.LevelSet.sphere(0.0),
+    lambda: _core.LevelSet.box(np.array([1.0, math.nan, 1.0])),
+    lambda: _core.World(max_substep=math.nan),
+    lambda: _core.World(travel_fraction=-1.0),
+    lambda: _core.World(cloth_max_substep=0.0),
+])
+def test_bad_numbers_are_value_errors(call):
+    with pytest.raises(ValueError):
+        call()
