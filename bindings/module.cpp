@@ -146,10 +146,14 @@ PYBIND11_MODULE(_core, m) {
             auto grid = VdbLevelSet::read(path);
             return LevelSet{grid, grid};
           }, py::arg("path"))
-      .def("write", [](const LevelSet& ls, const std::string& path) {
+      .def("write", [](const LevelSet& ls, const std::string& path, const std::map<std::string, std::string>& metadata) {
             if (!ls.grid) throw std::invalid_argument("only baked level sets are written to .vdb");
-            ls.grid->write(path);
-          }, py::arg("path"))
+            ls.grid->write(path, metadata);
+          }, py::arg("path"), py::arg("metadata") = std::map<std::string, std::string>(),
+          "Write to a .vdb file, with `metadata` (str -> str) stored in the grid")
+      .def_property_readonly("metadata", [](const LevelSet& ls) {
+            return ls.grid ? ls.grid->metadata() : std::map<std::string, std::string>();
+          }, "The grid's string metadata (empty for analytic shapes)")
       .def("phi", [](const LevelSet& ls, const Points& p) {
             Eigen::VectorXd out(p.rows());
             for (Eigen::Index i = 0; i < p.rows(); ++i) out[i] = ls.distance->phi(p.row(i).transpose());

@@ -187,9 +187,14 @@ std::shared_ptr<VdbLevelSet> VdbLevelSet::read(const std::string& path) {
   return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
 }
 
-void VdbLevelSet::write(const std::string& path) const {
-  // the grid is shared, not copied
-  const openvdb::GridCPtrVec grids{impl_->grid};
+void VdbLevelSet::write(const std::string& path, const std::map<std::string, std::string>& metadata) const {
+  // the tree is shared, not copied; only the metadata of the written copy differs
+  FloatGrid::Ptr copy = openvdb::ConstPtrCast<FloatGrid>(impl_->grid)->copy();
+  for (const auto& [key, value] : metadata) {
+    copy->removeMeta(key);
+    copy->insertMeta(key, openvdb::StringMetadata(value));
+  }
+  const openvdb::GridCPtrVec grids{copy};
   openvdb::io::File file(path);
   // blosc when this OpenVDB build has it (Debian's does), zip otherwise
   file.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK |
@@ -201,6 +206,16 @@ void VdbLevelSet::write(const std::string& path) const {
     throw std::runtime_error(path + ": cannot write .vdb file (" + e.what() + ")");
   }
   file.close();
+}
+
+std::map<std::string, std::string> VdbLevelSet::metadata() const {
+  std::map<std::string, std::string> out;
+  for (auto it = impl_->grid->beginMeta(); it != impl_->grid->endMeta(); ++it) {
+    if (it->second && it->second->typeName() == openvdb::StringMetadata::staticTypeName()) {
+      out[it->first] = it->second->str();
+    }
+  }
+  return out;
 }
 
 double VdbLevelSet::phi(const Vec3& p) const {

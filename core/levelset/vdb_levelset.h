@@ -9,6 +9,7 @@
 
 #include "levelset/signed_distance.h"
 
+#include <map>
 #include <memory>
 #include <string>
 
@@ -22,8 +23,11 @@ class VdbLevelSet final : public SignedDistance {
                                            double voxel_size, int exterior_band = 3);
   // Read the first FloatGrid of a .vdb file written by write() (or any level-set .vdb)
   static std::shared_ptr<VdbLevelSet> read(const std::string& path);
-  // Write the grid (named "surface", class level set) to a .vdb file any OpenVDB reader opens
-  void write(const std::string& path) const;
+  // Write the grid (named "surface", class level set) to a .vdb file any OpenVDB reader opens,
+  // with `metadata` added to the grid's own (string values; e.g. what the grid was baked from)
+  void write(const std::string& path, const std::map<std::string, std::string>& metadata = {}) const;
+  // The grid's string metadata (what write() was given, or another writer's)
+  std::map<std::string, std::string> metadata() const;
 
   ~VdbLevelSet() override;
 

@@ -9,13 +9,18 @@ subdivided box.
 Level sets are baked with OpenVDB only for bodies something can touch, and cached on disk
 by a hash of the mesh and the voxel size: a second bake of the same scene reads them back.
 The cache lives in ``$SIMBAKE_CACHE_DIR`` or ``$XDG_CACHE_HOME/simbake`` (default
-``~/.cache/simbake``); every file is written beside and renamed, so a crash never leaves a
-half-written grid that a later bake would trust.
+``~/.cache/simbake``); every file is written beside, read back and renamed, so a crash or a
+full disk never leaves a half-written grid that a later bake would trust. Each entry carries
+what it was baked from in the grid's own metadata (``simbake:key``: the hash of the mesh and
+voxel size that also names the file) and is used only when that and its voxel size match:
+a valid .vdb of another mesh copied to a cache path is baked again, not trusted.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +29,7 @@ import numpy as np
 
 from . import _core
 from .errors import SceneError
-from .files import write_atomically
+from .files import check_input_file, write_atomically
 from .scene import Body, Scene
 
 SPHERE_SUBDIVISIONS = 8  # 386 samples on a sphere, 0.5% faceting of the radius
@@ -36,6 +41,7 @@ VOXELS_ACROSS = 64       # automatic voxel size: the longest extent over this ..
 MIN_VOXELS_THIN = 6      # ... but at least this many voxels across the thinnest extent
 MAX_VOXELS = 5e7         # a filled grid of 5e7 voxels takes ~0.75 GB
 CACHE_FORMAT = "levelset-v1"
+CACHE_KEY = "simbake:key"     # grid metadata: the cache key the entry was baked for
 
 
 @dataclass(frozen=True)
@@ -63,10 +69,21 @@ def read_triangles(path: Path, file: str | Path, key: str, process: bool):
     one-line SceneError. process=False keeps the file's vertex order."""
     import trimesh
 
+    check_input_file(path, file, key)
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=process)
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+        if isinstance(mesh, trimesh.Trimesh) and not np.isfinite(mesh.vertices).all():
+            # before trimesh's processing drops them, and before a test NaN would confuse
+            raise SceneError(file, key, f"{path} has non-finite vertex coordinates (NaN or infinity)")
+        if process and isinstance(mesh, trimesh.Trimesh):
+            mesh.process()
+    except SceneError:
+        raise
     except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
-        detail = str(error).splitlines()[0] if str(error) else type(error).__name__
+        if isinstance(error, ImportError):  # a format whose optional reader is not installed
+            detail = f"no reader for {path.suffix or 'such'} files in this installation ({error})"
+        else:
+            detail = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise SceneError(file, key, f"cannot read mesh {path}: {detail}") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise SceneError(file, key, f"{path} holds no triangles")
@@ -85,8 +102,6 @@ def load_mesh(path: Path, file: str | Path, key: str) -> tuple[np.ndarray, np.nd
         mesh.invert()  # inside out: turn it the right way
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(mesh.faces, dtype=np.int32)
-    if not np.isfinite(vertices).all():
-        raise SceneError(file, key, f"{path} has non-finite vertex coordinates")
     return vertices, triangles
 
 
@@ -95,27 +110,57 @@ def automatic_voxel_size(vertices: np.ndarray) -> float:
     return float(min(extent.max() / VOXELS_ACROSS, extent.min() / MIN_VOXELS_THIN))
 
 
+def write_level_set(level_set: "_core.LevelSet", path: Path, metadata: dict[str, str] | None = None) -> None:
+    """Write a baked level set to `path` whole or not at all: written beside, read back (the
+    .vdb writer does not report a full disk), then renamed; an OutputError otherwise."""
+    metadata = dict(metadata or {})
+
+    def write(tmp: str) -> None:
+        try:
+            level_set.write(tmp, metadata)
+        except RuntimeError as error:
+            raise OSError(errno.EIO, str(error)) from None
+
+    def verify(tmp: str) -> None:
+        try:
+            back = _core.LevelSet.read(tmp)
+            whole = (back.active_voxel_count == level_set.active_voxel_count
+                     and all(back.metadata.get(k) == v for k, v in metadata.items()))
+        except RuntimeError:
+            whole = False
+        if not whole:
+            full = os.statvfs(os.path.dirname(tmp) or ".").f_bavail == 0
+            raise OSError(errno.ENOSPC if full else errno.EIO,
+                          os.strerror(errno.ENOSPC) if full else "the written file does not read back whole")
+
+    write_atomically(Path(path), write, verify)
+
+
 def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
                    cache: Path | None = None) -> "_core.LevelSet":
-    """The mesh's level set, read from the cache when this mesh and voxel size were baked before."""
+    """The mesh's level set, read from the cache when this mesh and voxel size were baked
+    before (and the entry says so), else baked and stored."""
     cache = cache_dir() if cache is None else cache
     digest = hashlib.sha256()
     digest.update(CACHE_FORMAT.encode())
     digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
     digest.update(np.ascontiguousarray(triangles, dtype="<i4").tobytes())
     digest.update(repr(float(voxel_size)).encode())
-    path = cache / "levelsets" / f"{digest.hexdigest()}.vdb"
+    key = digest.hexdigest()
+    path = cache / "levelsets" / f"{key}.vdb"
     if path.is_file():
         try:
-            return _core.LevelSet.read(str(path))
+            entry = _core.LevelSet.read(str(path))
+            if entry.metadata.get(CACHE_KEY) == key and math.isclose(entry.voxel_size, voxel_size, rel_tol=1e-9):
+                return entry
         except RuntimeError:
             pass  # unreadable cache entry: bake again and replace it
     level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomically(path, level_set.write)
-    except (OSError, RuntimeError):
-        pass  # a read-only cache costs a re-bake next time, nothing else
+        write_level_set(level_set, path, {CACHE_KEY: key})
+    except OSError:
+        pass  # a read-only or full cache costs a re-bake next time, nothing else
     return level_set
 
 

@@ -8,7 +8,8 @@
     simbake levelset MESH -o OUT.vdb [--voxel-size H] bakes one mesh's level set
 
 Bad input ends with one line on stderr naming the file, the key and the problem, exit
-status 2, no traceback and no output file. A failed check exits with status 1.
+status 2, no traceback and no output file. A failed check exits with status 1. Signals,
+output failures and the other exit statuses: simbake.guard.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 
 from . import __version__
 from .errors import SceneError, SimulationError
-from .files import check_output_path, write_atomically
+from .files import check_input_file, check_output_path
 
 
 
@@ -89,24 +90,24 @@ def _check(path: str) -> int:
 
 
 def _levelset(mesh: str, output: str, voxel_size: float | None) -> int:
-    from .assets import automatic_voxel_size, check_voxel_count, load_mesh
+    from .assets import automatic_voxel_size, check_voxel_count, load_mesh, write_level_set
 
     out = Path(output)
-    check_output_path(out, (".vdb",))
+    check_output_path(out, (".vdb",), inputs=[Path(mesh)])
     if voxel_size is not None and not (math.isfinite(voxel_size) and voxel_size > 0):
         raise SceneError(mesh, "--voxel-size", f"must be a finite number > 0, got {voxel_size}")
-    if not Path(mesh).is_file():
-        raise SceneError(mesh, "", "no such file")
+    check_input_file(Path(mesh), mesh, "mesh")
     from . import _core
 
     vertices, triangles = load_mesh(Path(mesh), mesh, "mesh")
     h = voxel_size or automatic_voxel_size(vertices)
-    check_voxel_count(vertices, h, mesh, "--voxel-size")
+    key = "--voxel-size" if voxel_size else ""  # an automatic size is the mesh's, not the option's
+    check_voxel_count(vertices, h, mesh, key)
     try:
         grid = _core.LevelSet.bake(vertices, triangles, h)
     except ValueError as error:
-        raise SceneError(mesh, "--voxel-size", str(error)) from None
-    write_atomically(out, grid.write)
+        raise SceneError(mesh, key, str(error)) from None
+    write_level_set(grid, out, {"simbake:mesh": Path(mesh).name})
     print(f"baked {mesh}: voxel size {h:.6g} m, {grid.active_voxel_count} active voxels -> {out}")
     return 0
 
@@ -159,6 +160,12 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .guard import run
+
+    return run(lambda: _main(argv))
+
+
+def _main(argv: list[str] | None) -> int:
     args = parser().parse_args(argv)
     try:
         if args.command == "bake":

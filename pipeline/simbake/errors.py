@@ -23,3 +23,8 @@ class SceneError(ValueError):
 
 class SimulationError(RuntimeError):
     """The solver produced a non-finite state; nothing is written."""
+
+
+class OutputError(OSError):
+    """An output could not be written (a full disk, an I/O error); the temp file is removed
+    and any earlier file at the output path is left as it was. The CLI exits with status 1."""

@@ -1,38 +1,187 @@
-"""Writing files so that they appear only when complete."""
+"""Writing files so that they appear whole or not at all, and never over an input.
+
+Every file simbake writes (USD caches, QA sidecars, .vdb level sets, cache entries,
+previews, reports) goes through here:
+
+* :func:`check_output_path` runs before any work: the suffix, the directory (it must exist
+  and take a new file: a probe is created and removed, so a read-only file system, ``/proc``
+  or a directory without write permission is refused up front), and the rule that no output
+  may be any file the command reads (compared by the file's identity, so a symlink, a hard
+  link or another spelling of the same path is caught).
+* :func:`write_atomically` (and :func:`commit` for writers that manage their own temp file,
+  the USD cache) writes beside the target under a hidden temp name
+  ``.NAME.<pid>-<token>.tmp<suffix>``, flushes it to disk (``fsync``: a full disk shows here
+  at the latest), optionally checks it (``verify``), and renames it into place; on any error
+  the temp file is removed, the old file is left as it was, and the error is an
+  :class:`~simbake.errors.OutputError` with one line naming the file.
+* :func:`remove_stale_temps` removes temp files that a killed process (SIGKILL, a power cut)
+  left beside an output, judged by their pid: it runs whenever the same output is written
+  again. A temp whose pid is alive on this machine is left alone.
+"""
 
 from __future__ import annotations
 
+import errno
 import os
+import re
 import secrets
+import stat
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
+
+from .errors import OutputError, SceneError
+
+_TEMP = re.compile(r"\.(?P<name>.+)\.(?P<pid>\d+)-[0-9A-Za-z-]+\.tmp(\.[0-9A-Za-z]+)?")
 
 
-def write_atomically(path: Path, write: Callable[[str], None]) -> None:
-    """Call write(tmp) on a temporary path beside `path`, then rename it into place.
+def temp_path(path: Path, suffix: str | None = None) -> Path:
+    """A fresh hidden temp name beside `path`: ``.NAME.<pid>-<token>.tmp<suffix>``."""
+    path = Path(path)
+    suffix = path.suffix if suffix is None else suffix
+    return path.parent / f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}"
 
-    The file gets the permissions of any new file (0666 less the umask); on failure the
-    temporary file is removed and `path` is untouched.
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True  # another user's process (or a pid we cannot ask about): leave it
+    return True
+
+
+def remove_stale_temps(path: Path) -> list[Path]:
+    """Remove temp files of `path` left by processes that are gone; returns what was removed."""
+    path = Path(path)
+    removed = []
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _TEMP.fullmatch(entry.name)
+        if not match or match["name"] != path.name or _alive(int(match["pid"])):
+            continue
+        try:
+            os.remove(entry.path)
+            removed.append(Path(entry.path))
+        except OSError:
+            pass
+    return removed
+
+
+def remove_if_present(path: Path) -> None:
+    try:
+        os.remove(path)
+    except FileNotFoundError:
+        pass
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    try:
+        os.fsync(fd)
+    except OSError as error:
+        if not directory or error.errno not in (errno.EINVAL, errno.ENOTSUP, errno.EBADF):
+            raise
+    finally:
+        os.close(fd)
+
+
+def describe(error: BaseException) -> str:
+    """An OSError (or a library's error) as a short phrase: 'No space left on device'."""
+    if isinstance(error, OSError) and error.strerror:
+        return error.strerror
+    text = str(error).strip().splitlines()
+    if not text:
+        return type(error).__name__
+    # USD's errors: "Error in 'Func' at line N in file F : 'the message'" -> the message
+    return text[0].rsplit(" : '", 1)[-1].rstrip("'") if " : '" in text[0] else text[0]
+
+
+def commit(tmp: Path, path: Path) -> None:
+    """Flush the finished temp file to disk and rename it onto `path` (atomic, same
+    directory); the file gets the permissions of any new file (0666 less the umask)."""
+    _fsync(tmp)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+    _fsync(path.parent, directory=True)
+
+
+def write_atomically(path: Path, write: Callable[[str], None],
+                     verify: Callable[[str], None] | None = None) -> None:
+    """Call write(tmp) on a temporary path beside `path`, check it, then rename it into place.
+
+    `verify(tmp)` (optional) raises when the written file is not what was meant (for writers
+    that do not report their own I/O errors). On failure the temporary file is removed,
+    `path` is untouched, and an OSError becomes an :class:`OutputError` naming `path`.
     """
-    tmp = path.parent / f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}"
+    path = Path(path)
+    remove_stale_temps(path)
+    tmp = temp_path(path)
     try:
         write(str(tmp))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        if verify is not None:
+            _fsync(tmp)
+            verify(str(tmp))
+        commit(tmp, path)
+    except OSError as error:
+        raise OutputError(f"{path}: cannot write: {describe(error)}; nothing was replaced") from None
     finally:
         if tmp.exists():
             tmp.unlink()
 
 
-def check_output_path(path: Path, suffixes: tuple[str, ...]) -> None:
-    """Reject an output path before any work is done: wrong suffix, missing directory, a directory."""
-    from .errors import SceneError
+def check_input_file(path: Path, file: str | Path, key: str) -> None:
+    """A file to read must be a readable regular file; else a one-line SceneError that says
+    why (missing, a symlink loop, a directory, permission)."""
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise SceneError(file, key, f"no such file: {path}") from None
+    except (OSError, ValueError) as error:
+        raise SceneError(file, key, f"cannot read {path}: {describe(error)}") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise SceneError(file, key, f"{path} is a directory, not a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise SceneError(file, key, f"{path} is not a regular file")
+    if not os.access(path, os.R_OK):
+        raise SceneError(file, key, f"cannot read {path}: permission denied")
 
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_output_path(path: Path, suffixes: tuple[str, ...], inputs: Iterable[Path] = ()) -> None:
+    """Reject an output path before any work is done: wrong suffix, missing or unwritable
+    directory, a directory, or any of `inputs` (the files the command reads)."""
+    path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise SceneError(path, "", f"output must end in {', '.join(suffixes)}")
-    if not path.parent.is_dir():
+    try:
+        parent_is_dir = path.parent.is_dir()
+        is_dir = path.is_dir()
+    except OSError as error:  # a symlink loop, a name too long
+        raise SceneError(path, "", f"cannot use as output: {describe(error)}") from None
+    if not parent_is_dir:
         raise SceneError(path, "", f"directory {path.parent} does not exist")
-    if path.is_dir():
+    if is_dir:
         raise SceneError(path, "", "is a directory; give a file name")
+    for source in inputs:
+        if source is not None and _same_file(path, Path(source)):
+            raise SceneError(path, "", f"would write over the input {source}; give another output (-o)")
+    probe = temp_path(path, ".probe")
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except OSError as error:
+        raise SceneError(path, "", f"cannot write in {path.parent}: {describe(error)}") from None
+    remove_if_present(probe)

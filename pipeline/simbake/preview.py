@@ -667,7 +667,7 @@ def write_preview(cache: str | Path, output: str | Path | None = None, *, frames
     CACHE.mp4 beside the cache); returns the path and the number of frames drawn."""
     cache = Path(cache)
     out = Path(output) if output is not None else cache.with_suffix(".mp4")
-    check_output_path(out, OUTPUT_SUFFIXES)
+    check_output_path(out, OUTPUT_SUFFIXES, inputs=[cache])
     sheet = out.suffix.lower() == ".png"
     preview = Preview(cache, size or (SHEET_SIZE if sheet else MOVIE_SIZE), camera)
     chosen = parse_frames(frames, preview.start, preview.end, SHEET_FRAMES if sheet else None)

@@ -189,7 +189,7 @@ def write_report(cache: str | Path, output: str | Path | None = None) -> Path:
     """Writes the report of `cache` to `output` (.html or .png; default CACHE.report.html)."""
     cache = Path(cache)
     out = Path(output) if output is not None else report_path(cache)
-    check_output_path(out, OUTPUT_SUFFIXES)
+    check_output_path(out, OUTPUT_SUFFIXES, inputs=[cache, qa_path(cache)])
     qa = _load(cache)
     fig = figure(cache, qa)
     png = io.BytesIO()

@@ -170,6 +170,10 @@ class Scene:
             digest.update(_file_digest(path))
         return digest.hexdigest()
 
+    def input_files(self) -> tuple[Path, ...]:
+        """Every file a bake of this scene reads: the scene file, then its meshes."""
+        return (self.path, *self._mesh_paths())
+
     def _mesh_paths(self) -> tuple[Path, ...]:
         paths = [b.shape.mesh_path for b in self.bodies] + [c.mesh_path for c in self.cloths]
         return tuple(dict.fromkeys(p for p in paths if p is not None))

@@ -16,9 +16,9 @@ import numpy as np
 
 from . import _core, __version__
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
-from .errors import SceneError, SimulationError
-from .files import check_output_path
-from .qa import QualityRecorder
+from .errors import OutputError, SceneError, SimulationError
+from .files import check_output_path, describe
+from .qa import QualityRecorder, qa_path
 from .scene import Scene
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim
 
@@ -96,7 +96,9 @@ def bake(scene: Scene, output: str | Path, *,
     beside the cache as CACHE.qa.json, summarized in its customLayerData.
     """
     output = Path(output)
-    check_output_path(output, USD_SUFFIXES)
+    check_output_path(output, USD_SUFFIXES, inputs=scene.input_files())
+    if qa:
+        check_output_path(qa_path(output), (".json",), inputs=scene.input_files())
     start = time.perf_counter()
     assets = load_assets(scene)
     cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
@@ -112,6 +114,20 @@ def bake(scene: Scene, output: str | Path, *,
     cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                              face_vertex_indices=asset.triangles.reshape(-1))
                    for cloth, asset in zip(scene.cloths, cloths)]
+    try:
+        return _bake(scene, output, world, assets, cloths, prims, cloth_prims, on_frame, qa, start)
+    except Exception as error:
+        if isinstance(error, (SceneError, SimulationError, OutputError)) or not _write_failure(error):
+            raise
+        raise OutputError(f"{output}: cannot write: {describe(error)}; nothing was replaced") from None
+
+
+def _write_failure(error: Exception) -> bool:
+    """An OSError, or USD's own report of a failed save (Tf.ErrorException)."""
+    return isinstance(error, OSError) or type(error).__name__ == "ErrorException"
+
+
+def _bake(scene, output, world, assets, cloths, prims, cloth_prims, on_frame, qa, start) -> BakeStats:
     frame_dt = 1.0 / scene.fps
     total = scene.frame_count
     recorder = QualityRecorder(scene) if qa else None

@@ -61,6 +61,7 @@ import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
 
 from .errors import SimulationError
+from .files import commit, remove_if_present as _remove, remove_stale_temps
 
 __all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS"]
 
@@ -230,13 +231,6 @@ def _vertex_normals(points: np.ndarray, counts: np.ndarray, indices: np.ndarray)
     return normals
 
 
-def _remove(path: Path) -> None:
-    try:
-        os.remove(path)
-    except FileNotFoundError:
-        pass
-
-
 def _cleanup(paths: list[Path]) -> None:  # weakref.finalize callback: must not reference self
     for p in paths:
         _remove(p)
@@ -311,6 +305,8 @@ class CacheWriter:
         self._done = False
 
         # temp files beside the target; the crate one always, the text one only for .usda
+        # (and those a killed bake of the same target left behind are removed first)
+        remove_stale_temps(self.path)
         tag = f".{self.path.name}.{os.getpid()}-{next(_counter)}-{uuid.uuid4().hex[:8]}.tmp"
         self._tmp = self.path.with_name(tag + ".usdc")
         self._tmp_text = self.path.with_name(tag + ".usda") if self.format == "usda" else None
@@ -564,7 +560,7 @@ class CacheWriter:
                     raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
                 final = self._tmp_text
             self._layer = None  # release the crate file before it is renamed or removed
-            os.replace(final, self.path)
+            commit(final, self.path)  # fsync, then rename
             if final != self._tmp:
                 _remove(self._tmp)
         except BaseException:
