@@ -30,6 +30,7 @@ import numpy as np
 from . import _core
 from .errors import SceneError
 from .files import check_input_file, write_atomically
+from .limits import check_mesh_extent
 from .scene import Body, Scene
 
 SPHERE_SUBDIVISIONS = 8  # 386 samples on a sphere, 0.5% faceting of the radius
@@ -75,6 +76,8 @@ def read_triangles(path: Path, file: str | Path, key: str, process: bool):
         if isinstance(mesh, trimesh.Trimesh) and not np.isfinite(mesh.vertices).all():
             # before trimesh's processing drops them, and before a test NaN would confuse
             raise SceneError(file, key, f"{path} has non-finite vertex coordinates (NaN or infinity)")
+        if isinstance(mesh, trimesh.Trimesh):
+            check_mesh_extent(mesh.vertices, file, key, path)
         if process and isinstance(mesh, trimesh.Trimesh):
             mesh.process()
     except SceneError:

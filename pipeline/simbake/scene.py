@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
 from .errors import SceneError
+from .limits import check_scene
 
 __all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_scene"]
 
@@ -233,7 +234,7 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
     cloths = tuple(_cloth(t, base_dir) for t in root.tables("cloths", _CLOTH_KEYS))
     _check_unique_names(file, bodies, cloths)
 
-    return Scene(
+    scene = Scene(
         path=scene_path,
         source=file,
         fps=settings.number("fps", Scene.fps, _greater(0)),
@@ -245,6 +246,8 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
         bodies=bodies,
         cloths=cloths,
     )
+    check_scene(scene)  # the physical range and the budget of what the scene alone decides
+    return scene
 
 
 def _read_toml(file: str, path: Path) -> dict[str, Any]:
@@ -397,7 +400,7 @@ def _mesh_file(t: _Table, name: str, base_dir: Path) -> Path:
     try:
         path = (base_dir / text).resolve()
         exists, is_file = path.exists(), path.is_file()
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RuntimeError) as exc:  # RuntimeError: a symlink loop
         raise t.error(name, f"cannot access mesh file {text!r}: {exc}") from None
     if not exists:
         raise t.error(name, f"mesh file not found: {path}")

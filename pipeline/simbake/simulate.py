@@ -18,6 +18,7 @@ from . import _core, __version__
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
+from .limits import check_budget, check_scene
 from .qa import QualityRecorder, qa_path
 from .scene import Scene
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim
@@ -96,6 +97,7 @@ def bake(scene: Scene, output: str | Path, *,
     beside the cache as CACHE.qa.json, summarized in its customLayerData.
     """
     output = Path(output)
+    check_scene(scene)  # a Scene made in Python (or from USD) meets the same range as a file's
     check_output_path(output, USD_SUFFIXES, inputs=scene.input_files())
     if qa:
         check_output_path(qa_path(output), (".json",), inputs=scene.input_files())
@@ -114,6 +116,8 @@ def bake(scene: Scene, output: str | Path, *,
     cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                              face_vertex_indices=asset.triangles.reshape(-1))
                    for cloth, asset in zip(scene.cloths, cloths)]
+    check_budget(scene, output, scene.substeps or world.automatic_substeps(1.0 / scene.fps),
+                 sum(p.dynamic for p in prims), [len(c.vertices) for c in cloths])
     try:
         return _bake(scene, output, world, assets, cloths, prims, cloth_prims, on_frame, qa, start)
     except Exception as error:

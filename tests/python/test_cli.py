@@ -360,8 +360,9 @@ def test_bake_bad_input_default_output_not_written(write_scene, tmp_path):
 # a failed bake never destroys what is already at the output path
 # --------------------------------------------------------------------------------------------
 
-# failures at each stage: the scene file, the assets, and the solver mid-bake (a state that
-# overflows to inf after ~26 frames, while the writer's temp file is already open and growing)
+# failures at each stage: the scene file, the assets, and the solver mid-bake (the state turns
+# non-finite after 26 frames, while the writer's temp file is already open and growing; no
+# scene within simbake's physical range does that, so the world is made to report it)
 FAILURES = {
     "scene": (BODY + "mass = -1.0\n", {}, 2),
     "asset": (BODY.replace('shape = { type = "sphere", radius = 0.1 }', 'mesh = "open.obj"'),
@@ -370,14 +371,35 @@ FAILURES = {
         [scene]
         fps = 24
         end_frame = 40
-        [solver]
-        substeps = 1
         [[bodies]]
         name = "bullet"
         shape = { type = "sphere", radius = 0.1 }
-        linear_velocity = [1.7e308, 0.0, 0.0]
+        linear_velocity = [10.0, 0.0, 0.0]
     """, {}, 1),
 }
+
+# `python -c NON_FINITE_AT_FRAME_26 bake ...`: the CLI with a world whose statistics report a
+# non-finite state from the 26th frame on
+NON_FINITE_AT_FRAME_26 = """
+import sys
+import simbake.simulate as simulate
+
+class Failing:
+    def __init__(self, world):
+        self.world, self.frames = world, 0
+    def __getattr__(self, name):
+        return getattr(self.world, name)
+    def step_frame(self, *args):
+        self.frames += 1
+        return self.world.step_frame(*args)
+    def statistics(self):
+        return {**self.world.statistics(), "finite": self.frames < 26}
+
+build = simulate.build_world
+simulate.build_world = lambda *args, **kwargs: Failing(build(*args, **kwargs))
+from simbake.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
 
 
 # the suffix matters only once the writer is open (a .usda bake has two temp files)
@@ -393,7 +415,11 @@ def test_failed_bake_keeps_an_existing_file(write_scene, tmp_path, stage, suffix
     out.write_bytes(precious)
     before = listing(tmp_path)
 
-    result = simbake("bake", "scene.toml", "-o", out.name, cwd=tmp_path)
+    if stage == "solver":
+        result = subprocess.run([sys.executable, "-c", NON_FINITE_AT_FRAME_26, "bake", "scene.toml", "-o", out.name],
+                                cwd=tmp_path, capture_output=True, text=True, timeout=TIMEOUT)
+    else:
+        result = simbake("bake", "scene.toml", "-o", out.name, cwd=tmp_path)
 
     line = assert_one_line_error(result, status)
     assert "scene.toml" in line

@@ -145,34 +145,39 @@ def test_qa_sidecar_full_disk_is_one_line_and_keeps_old_files(write_scene, tmp_p
     assert not any(n.startswith(".") for n in listing(tmp_path))
 
 
-def run_on_full_disk(tmp_path: Path, out: str, command: list[str]) -> tuple[subprocess.CompletedProcess, str]:
+def run_on_full_disk(tmp_path: Path, out: str, command: list[str], leave_kb: int) -> subprocess.CompletedProcess:
     """Run `command` in a private mount namespace, in a small tmpfs (tmp_path/full) that
-    holds `out` (the bytes b"precious") and is otherwise filled up; returns the result and
-    the command's stderr without the status line. Skips when no namespace can be made."""
+    holds `out` (the bytes b"precious") and is otherwise filled up but for `leave_kb`; its
+    stderr ends with `status=N`. Skips when no namespace can be made."""
     if shutil.which("unshare") is None or subprocess.run(["unshare", "-rm", "true"]).returncode:
         pytest.skip("no user mount namespace for a small tmpfs")
     full = tmp_path / "full"
     full.mkdir()
     script = (f"mount -t tmpfs -o size=256k none {full} && cd {full} && printf precious > {out} && "
-              f"(dd if=/dev/zero of=filler bs=4k 2>/dev/null; {' '.join(command)}; echo status=$? >&2; "
+              f"(dd if=/dev/zero of=filler bs=4k 2>/dev/null; truncate -s -{leave_kb}K filler; {' '.join(command)}; echo status=$? >&2; "
               f"echo LS: $(ls -A); sha256sum {out})")
     return subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True,
                           timeout=120, cwd=tmp_path, env={**os.environ, "SIMBAKE_CACHE_DIR": str(full / "cache")})
 
 
-@pytest.mark.parametrize("what", ["levelset", "bake"])
-def test_real_full_disk_keeps_the_old_output(tmp_path, what):
+@pytest.mark.parametrize("what, leave_kb, status, words", [
+    ("levelset", 0, 1, "No space left on device"),
+    # the bake's estimate (2 kB of samples) fits in 8 kB, the file (13 kB) does not
+    ("bake", 8, 1, "No space left on device"),
+    ("bake", 0, 2, "scene.end_frame: the cache needs"),  # refused up front by the estimate
+])
+def test_real_full_disk_keeps_the_old_output(tmp_path, what, leave_kb, status, words):
     (tmp_path / "box.obj").write_text(BOX_OBJ)
     (tmp_path / "scene.toml").write_text(textwrap.dedent(DROP_SCENE))
     out = "old.vdb" if what == "levelset" else "old.usdc"
     py = [sys.executable, "-m", "simbake"]
     command = ([*py, "levelset", str(tmp_path / "box.obj"), "-o", out, "--voxel-size", "0.02"]
                if what == "levelset" else [*py, "bake", str(tmp_path / "scene.toml"), "-o", out, "-q"])
-    result = run_on_full_disk(tmp_path, out, command)
+    result = run_on_full_disk(tmp_path, out, command, leave_kb)
     lines = result.stderr.splitlines()
-    assert lines[-1] == "status=1", result.stderr
+    assert lines[-1] == f"status={status}", result.stderr
     assert len(lines) == 2 and lines[0].startswith("simbake: error: "), result.stderr
-    assert "No space left on device" in lines[0] and out in lines[0]
+    assert words in lines[0] and (out in lines[0] or status == 2), lines[0]
     listed = next(l for l in result.stdout.splitlines() if l.startswith("LS:")).split()[1:]
     assert sorted(listed) == ["filler", out]  # no temp left on the full disk
     assert result.stdout.splitlines()[-1].split()[0] == hashlib.sha256(b"precious").hexdigest()

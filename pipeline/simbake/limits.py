@@ -1,0 +1,182 @@
+"""What simbake takes on: the physical range of a scene's values and the resource budget of a
+bake, both checked before any work is done (README, "Guarantees").
+
+Physically absurd input (a 1e300 m grid, gravity of 1e300 m/s^2, a cloth 1e6 m thick) is bad
+input, not a simulation failure: :func:`check_scene` refuses it when the scene is loaded, with
+the file and key named, exit status 2. :func:`check_budget` estimates, once the world is built
+and before the first frame, the memory, disk and substeps the bake would need, and refuses
+what does not fit, naming the key to change.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+from pathlib import Path
+
+from .errors import SceneError
+
+# --- the physical range (SI units) -------------------------------------------------------
+LENGTH = 1e5            # m: positions, sizes, heights, voxel sizes, mesh coordinates
+SMALLEST = 1e-6         # m: the smallest radius, box or grid size
+THICKNESS = 1.0         # m: a cloth's collision thickness
+SPEED = 1e5             # m/s, and rad/s for spin
+ACCELERATION = 1e4      # m/s^2: gravity (about 1,000 g)
+FPS = (1e-3, 1e5)       # frames per second
+DENSITY = (1e-6, 1e6)   # kg/m^3
+MASS = (1e-9, 1e12)     # kg
+AREA_DENSITY = (1e-9, 1e4)  # kg/m^2
+STIFFNESS = 1e12        # N/m (a cloth's stretch stiffness)
+BEND = 1e6              # N m
+DAMPING = 1e3           # s
+STRAIN = 1e3            # a strain limit
+FRICTION = 1e3          # a friction coefficient
+KEY_TIME = 1e9          # s
+FRAME_NUMBER = 2 ** 53  # |frame|: time codes are doubles, exact only up to here
+SUBSTEPS_PER_FRAME = 4096  # [solver] substeps: the solver's own cap per frame
+
+# --- the resource budget -----------------------------------------------------------------
+MAX_FRAMES = 1_000_000           # frames in one bake (11.5 hours at 24 fps)
+MAX_SUBSTEPS = 100_000_000       # solver steps in one bake (estimated from the first frame)
+DEFAULT_MEMORY = 8 * 2 ** 30     # bytes, or half the machine's memory when that is less;
+                                 # SIMBAKE_MEMORY_BUDGET (bytes, or with K, M, G) overrides
+CLOTH_VERTEX_BYTES = 8192        # solver memory per cloth vertex (measured: ~6.4 kB at 257 x 257)
+RIGID_SAMPLE_BYTES = 120         # writer memory per dynamic body and frame (USD holds rigid
+                                 # samples unpacked until the file is closed: ~60 B each)
+FRAME_INDEX_BYTES = 16           # file bytes per sampled attribute and frame, besides its values
+
+
+def _error(scene, key: str, problem: str) -> SceneError:
+    return SceneError(scene.source or scene.path, key, problem)
+
+
+def _range(scene, key: str, value: float, lo: float | None, hi: float, unit: str = "") -> None:
+    unit = f" {unit}" if unit else ""
+    if abs(value) > hi:
+        raise _error(scene, key, f"{value:g}{unit} is outside simbake's physical range "
+                                 f"(at most {hi:g}{unit} in size)")
+    if lo is not None and 0 < value < lo:
+        raise _error(scene, key, f"{value:g}{unit} is below simbake's physical range (at least {lo:g}{unit})")
+
+
+def _vector(scene, key: str, values, hi: float, unit: str, lo: float | None = None) -> None:
+    for i, v in enumerate(values):
+        _range(scene, f"{key}[{i}]", v, lo, hi, unit)
+
+
+def check_scene(scene) -> None:
+    """Refuse values outside the physical range, frame numbers that time codes cannot hold
+    exactly, and cloth grids whose solver would not fit the memory budget."""
+    for name in ("start_frame", "end_frame"):
+        if abs(getattr(scene, name)) > FRAME_NUMBER:
+            raise _error(scene, f"scene.{name}", f"must be within +-2^53 ({FRAME_NUMBER}), where every frame's "
+                                                 f"time code is exact, got {getattr(scene, name)}")
+    _range(scene, "scene.fps", scene.fps, FPS[0], FPS[1], "fps")
+    if scene.substeps > SUBSTEPS_PER_FRAME:
+        raise _error(scene, "solver.substeps", f"must be at most {SUBSTEPS_PER_FRAME} (the solver's cap "
+                                               f"per frame), got {scene.substeps}")
+    _vector(scene, "scene.gravity", scene.gravity, ACCELERATION, "m/s^2")
+    if scene.frame_count > MAX_FRAMES:
+        raise _error(scene, "scene.end_frame", f"{scene.frame_count} frames is more than the budget of "
+                                               f"{MAX_FRAMES:,} frames in one bake; bake it in parts")
+    if scene.ground is not None:
+        _range(scene, "ground.height", scene.ground.height, None, LENGTH, "m")
+        _range(scene, "ground.friction", scene.ground.friction, None, FRICTION)
+    for i, b in enumerate(scene.bodies):
+        key = f"bodies[{i}]"
+        if b.shape.kind == "sphere":
+            _range(scene, f"{key}.shape.radius", b.shape.radius, SMALLEST, LENGTH, "m")
+        elif b.shape.kind == "box":
+            _vector(scene, f"{key}.shape.size", b.shape.size, LENGTH, "m", SMALLEST)
+        if b.density is not None:
+            _range(scene, f"{key}.density", b.density, *DENSITY, "kg/m^3")
+        if b.mass is not None:
+            _range(scene, f"{key}.mass", b.mass, *MASS, "kg")
+        _vector(scene, f"{key}.position", b.position, LENGTH, "m")
+        _vector(scene, f"{key}.linear_velocity", b.linear_velocity, SPEED, "m/s")
+        _vector(scene, f"{key}.angular_velocity", b.angular_velocity, SPEED, "rad/s")
+        _range(scene, f"{key}.friction", b.friction, None, FRICTION)
+        _range(scene, f"{key}.voxel_size", b.voxel_size, None, LENGTH, "m")
+        for k, keyed in enumerate(b.keys):
+            _range(scene, f"{key}.keys[{k}].time", keyed.time, None, KEY_TIME, "s")
+            _vector(scene, f"{key}.keys[{k}].position", keyed.position, LENGTH, "m")
+    for i, c in enumerate(scene.cloths):
+        key = f"cloths[{i}]"
+        if c.grid_size is not None:
+            _vector(scene, f"{key}.grid.size", c.grid_size, LENGTH, "m", SMALLEST)
+            vertices = c.grid_resolution[0] * c.grid_resolution[1]
+            _memory(scene, f"{key}.grid.resolution", vertices * CLOTH_VERTEX_BYTES,
+                    f"a {c.grid_resolution[0]} x {c.grid_resolution[1]} cloth")
+        _vector(scene, f"{key}.position", c.position, LENGTH, "m")
+        _range(scene, f"{key}.area_density", c.area_density, *AREA_DENSITY, "kg/m^2")
+        _range(scene, f"{key}.stretch_stiffness", c.stretch_stiffness, None, STIFFNESS, "N/m")
+        _range(scene, f"{key}.bend_stiffness", c.bend_stiffness, None, BEND, "N m")
+        _range(scene, f"{key}.damping", c.damping, None, DAMPING, "s")
+        _range(scene, f"{key}.strain_limit", c.strain_limit, None, STRAIN)
+        _range(scene, f"{key}.friction", c.friction, None, FRICTION)
+        _range(scene, f"{key}.thickness", c.thickness, None, THICKNESS, "m")
+
+
+def check_mesh_extent(vertices, file, key: str, path) -> None:
+    """A mesh's coordinates must lie within the physical range too."""
+    largest = float(abs(vertices).max()) if len(vertices) else 0.0
+    if largest > LENGTH:
+        raise SceneError(file, key, f"{path} has a coordinate of {largest:g} m, outside simbake's "
+                                    f"physical range (at most {LENGTH:g} m)")
+
+
+def memory_budget() -> int:
+    """Bytes a bake may plan to use: SIMBAKE_MEMORY_BUDGET, else the smaller of 8 GiB and half
+    the machine's memory."""
+    text = os.environ.get("SIMBAKE_MEMORY_BUDGET", "").strip().upper()
+    if text:
+        scale = {"K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30}.get(text[-1], 1)
+        try:
+            return int(float(text.rstrip("KMG")) * scale)
+        except ValueError:
+            pass  # unreadable: the default
+    try:
+        half = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") // 2
+    except (OSError, ValueError):
+        half = DEFAULT_MEMORY
+    return min(DEFAULT_MEMORY, half)
+
+
+def _gb(n: float) -> str:
+    return f"{n / 2 ** 30:.3g} GiB" if n >= 2 ** 30 else f"{n / 2 ** 20:.3g} MiB"
+
+
+def _memory(scene, key: str, needed: float, what: str) -> None:
+    budget = memory_budget()
+    if needed > budget:
+        raise _error(scene, key, f"{what} needs ~{_gb(needed)} of memory, more than the budget of "
+                                 f"{_gb(budget)} (SIMBAKE_MEMORY_BUDGET)")
+
+
+def check_budget(scene, output: Path, substeps_per_frame: int, dynamic_bodies: int,
+                 cloth_vertices: list[int]) -> None:
+    """Refuse a bake whose estimated substeps, memory or disk do not fit, before it starts.
+
+    substeps_per_frame: the scene's fixed count, or the automatic count of the first frame.
+    """
+    frames = scene.frame_count
+    fixed = scene.substeps > 0
+    total = frames * substeps_per_frame
+    if total > MAX_SUBSTEPS:
+        key = "solver.substeps" if fixed else "scene.end_frame"
+        raise _error(scene, key, f"{frames} frames at {substeps_per_frame} substeps each is ~{total:.3g} "
+                                 f"solver steps, more than the budget of {MAX_SUBSTEPS:.0e}")
+    vertices = sum(cloth_vertices)
+    _memory(scene, "scene.end_frame", vertices * CLOTH_VERTEX_BYTES + frames * dynamic_bodies * RIGID_SAMPLE_BYTES,
+            f"{frames} frames of {dynamic_bodies} moving bodies and {vertices} cloth vertices")
+    sampled = 2 * dynamic_bodies + 4 * len(cloth_vertices)
+    per_frame = 56 * dynamic_bodies + sum(36 * n + 24 for n in cloth_vertices) + FRAME_INDEX_BYTES * sampled
+    disk = frames * per_frame
+    try:
+        free = shutil.disk_usage(Path(output).parent).free
+    except OSError:
+        return
+    if disk > free:
+        raise _error(scene, "scene.end_frame", f"the cache needs ~{_gb(disk)} on disk, more than the "
+                                               f"{_gb(free)} free in {Path(output).parent}")
