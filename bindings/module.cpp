@@ -107,6 +107,11 @@ PYBIND11_MODULE(_core, m) {
   m.def("vertex_normals", [](const Points& v, const Triangles& t) { return vertex_normals(to_mesh(v, t)); },
         py::arg("vertices"), py::arg("triangles"));
   m.def("surface_samples", [](const Points& v, const Triangles& t, double spacing) {
+          // no edge is longer than the box's diagonal: bound the pieces any edge is cut into
+          const double diagonal = v.rows() ? (v.colwise().maxCoeff() - v.colwise().minCoeff()).norm() : 0.0;
+          if (!(diagonal / positive(spacing, "max_spacing") < 1e6)) {
+            throw std::invalid_argument("max_spacing is too small for this mesh (over 1e6 samples per edge)");
+          }
           return surface_samples(to_mesh(v, t), spacing);
         }, py::arg("vertices"), py::arg("triangles"), py::arg("max_spacing"),
         "Vertices plus points along every edge longer than max_spacing");

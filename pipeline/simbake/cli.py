@@ -101,6 +101,8 @@ def _levelset(mesh: str, output: str, voxel_size: float | None) -> int:
 
     vertices, triangles = load_mesh(Path(mesh), mesh, "mesh")
     h = voxel_size or automatic_voxel_size(vertices)
+    if not h > 0:
+        raise SceneError(mesh, "mesh", "is flat (no extent along some axis): a level set needs an inside")
     key = "--voxel-size" if voxel_size else ""  # an automatic size is the mesh's, not the option's
     check_voxel_count(vertices, h, mesh, key)
     try:

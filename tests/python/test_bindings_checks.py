@@ -94,6 +94,8 @@ def test_step_frame_rejects_negative_substeps():
     lambda: _core.World(max_substep=math.nan),
     lambda: _core.World(travel_fraction=-1.0),
     lambda: _core.World(cloth_max_substep=0.0),
+    lambda: _core.surface_samples(*_core.box_mesh(np.array([1.0, 1.0, 1.0]), 1), 1e-300),
+    lambda: _core.surface_samples(*_core.box_mesh(np.array([1.0, 1.0, 1.0]), 1), math.nan),
 ])
 def test_bad_numbers_are_value_errors(call):
     with pytest.raises(ValueError):

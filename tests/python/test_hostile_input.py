@@ -154,6 +154,7 @@ def test_symlink_loops_in_scene_and_mesh_paths(tmp_path):
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv nan 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n", "non-finite", "not a closed"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e200 1e200 1e200\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n", "physical range",
      "Warning"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 1 3 2\n", "is flat", "voxel"),  # closed, but no inside
 ])
 def test_mesh_messages_blame_the_right_thing(tmp_path, mesh, words, not_words):
     (tmp_path / "m.obj").write_text(mesh)
