@@ -45,11 +45,12 @@ def _on_signal(signum, frame) -> None:
 
 
 def quiet_libraries() -> None:
-    """The command line prints its own messages only: NumPy's and trimesh's warnings (the
-    warnings module, trimesh's logger) would come before the one error line."""
-    warnings.filterwarnings("ignore")
-    logging.getLogger("trimesh").addHandler(logging.NullHandler())
-    logging.getLogger("trimesh").propagate = False
+    """The command line prints its own messages only: trimesh's log lines would come before
+    the one error line (NumPy's warnings are ignored while a command runs, see run)."""
+    logger = logging.getLogger("trimesh")
+    if not any(isinstance(h, logging.NullHandler) for h in logger.handlers):
+        logger.addHandler(logging.NullHandler())
+    logger.propagate = False
 
 
 def _print_error(text: str) -> None:
@@ -70,7 +71,9 @@ def run(command: Callable[[], int]) -> int:
         except ValueError:  # not the main thread: leave the signals alone
             pass
     try:
-        return command()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # NumPy's and trimesh's RuntimeWarnings
+            return command()
     except Terminated as stop:
         try:
             print(f"simbake: {signal.Signals(stop.signum).name}: stopped; nothing more was written",

@@ -100,3 +100,36 @@ def test_step_frame_rejects_negative_substeps():
 def test_bad_numbers_are_value_errors(call):
     with pytest.raises(ValueError):
         call()
+
+
+def test_random_arguments_never_crash():
+    """A fixed-seed sample of hostile arguments to every method taking an index or a number:
+    each call returns or raises IndexError/ValueError/TypeError (a crash ends the test run)."""
+    import random
+
+    rng = random.Random(10)
+    ints = [0, 1, -1, 2, 99, -5, 10**6, 2**31, 2**40, -(2**63), 2**63 - 1]
+    floats = [0.0, -0.0, 1.0, -1.0, 1e-309, 1e300, -1e300, math.nan, math.inf, -math.inf]
+    body, cloth = one_body_world(), one_cloth_world()
+    calls = [
+        lambda w: w.asleep(rng.choice(ints)),
+        lambda w: w.body_state(rng.choice(ints)),
+        lambda w: w.cloth_state(rng.choice(ints)),
+        lambda w: w.cloth_max_strain(rng.choice(ints)),
+        lambda w: w.step(rng.choice(floats)),
+        lambda w: w.step_frame(rng.choice(floats), rng.choice(ints)),
+        lambda w: w.automatic_substeps(rng.choice(floats)),
+        lambda w: w.automatic_cloth_steps(rng.choice(floats)),
+        lambda w: w.set_kinematic_track(rng.choice(ints), [rng.choice(floats)], np.zeros((1, 3)),
+                                        np.array([[1.0, 0.0, 0.0, 0.0]])),
+        lambda w: w.set_ground(rng.choice(floats), rng.choice(floats), rng.choice(floats)),
+    ]
+    outcomes = set()
+    for _ in range(400):
+        world = rng.choice([body, cloth])
+        try:
+            rng.choice(calls)(world)
+            outcomes.add("ok")
+        except (IndexError, ValueError, TypeError) as error:
+            outcomes.add(type(error).__name__)
+    assert {"ok", "IndexError", "ValueError", "TypeError"} <= outcomes
