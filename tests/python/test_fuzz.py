@@ -107,7 +107,8 @@ def mutate(rng: random.Random, scene: dict) -> None:
     elif what < 0.7 and table:
         del table[rng.choice(list(table))]
     elif what < 0.85:
-        body = rng.choice(scene.get("bodies") or [{}])
+        bodies = scene.get("bodies")
+        body = rng.choice(bodies) if isinstance(bodies, list) and bodies else {}
         if isinstance(body, dict):
             body["mesh"] = rng.choice(PATHS)
             body.pop("shape", None)
