@@ -52,7 +52,7 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
         volume = asset.mass_properties["volume"]
         mass = body.mass if body.mass is not None else body.density * volume
         try:
-            world.add_body(asset.level_set, asset.samples, asset.mass_properties, mass,
+            world.add_body(asset.level_set, asset.samples, _mass_properties(body, asset, mass), mass,
                            np.array(body.position), np.array(body.orientation),
                            np.array(body.linear_velocity), np.array(body.angular_velocity),
                            body.friction, body.restitution, body.kinematic)
@@ -74,6 +74,20 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
     return world
 
 
+def _mass_properties(body, asset: BodyAsset, mass: float) -> dict:
+    """The shape's mass properties (at unit density), with an authored centre of mass and
+    inertia (a USD shot's PhysicsMassAPI) in their place; the core scales inertia by
+    mass / volume, so an authored inertia I goes in as I * volume / mass."""
+    if body.center_of_mass is None and body.inertia is None:
+        return asset.mass_properties
+    props = dict(asset.mass_properties)
+    if body.center_of_mass is not None:
+        props["center"] = np.array(body.center_of_mass, dtype=np.float64)
+    if body.inertia is not None:
+        props["inertia"] = np.array(body.inertia, dtype=np.float64) * props["volume"] / mass
+    return props
+
+
 def _provenance(scene: Scene) -> dict:
     return {
         "simbake": {
@@ -87,20 +101,13 @@ def _provenance(scene: Scene) -> dict:
     }
 
 
-def bake(scene: Scene, output: str | Path, *,
-         on_frame: Callable[[int, int], None] | None = None, qa: bool = True) -> BakeStats:
-    """Simulate the scene and stream its USD cache to `output` (appears only when complete).
+def _cache_writer(scene: Scene, output: Path, assets, cloths):
+    """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
+    layer of overs for a USD shot (simbake.usd_layer)."""
+    if scene.shot is not None:
+        from .usd_layer import ShotLayerWriter
 
-    on_frame(done, total) is called after each written frame (for progress bars). With `qa`
-    (the default) every written frame's quality figures are measured (simbake.qa) and written
-    beside the cache as CACHE.qa.json, summarized in its customLayerData.
-    """
-    output = Path(output)
-    check_output_path(output, USD_SUFFIXES)
-    start = time.perf_counter()
-    assets = load_assets(scene)
-    cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
-    world = build_world(scene, assets, cloths)
+        return ShotLayerWriter(output, scene, provenance=_provenance(scene))
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
@@ -112,13 +119,49 @@ def bake(scene: Scene, output: str | Path, *,
     cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                              face_vertex_indices=asset.triangles.reshape(-1))
                    for cloth, asset in zip(scene.cloths, cloths)]
+    return CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
+                       bodies=prims, cloths=cloth_prims, provenance=_provenance(scene))
+
+
+def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
+    """A USD shot's cache (and --shot stage) must never be one of the input's layers."""
+    from .usd_layer import check_not_input
+
+    check_not_input(output, scene, "cache")
+    if shot is not None:
+        if scene.shot is None:
+            raise SceneError(shot, "", "--shot needs a USD shot as input (.usd, .usda, .usdc)")
+        check_output_path(shot, USD_SUFFIXES)
+        check_not_input(shot, scene, "--shot stage")
+        if shot.absolute() == output.absolute():
+            raise SceneError(shot, "", "--shot must differ from the cache (-o)")
+
+
+def bake(scene: Scene, output: str | Path, *,
+         on_frame: Callable[[int, int], None] | None = None, qa: bool = True,
+         shot: str | Path | None = None) -> BakeStats:
+    """Simulate the scene and stream its USD cache to `output` (appears only when complete).
+
+    on_frame(done, total) is called after each written frame (for progress bars). With `qa`
+    (the default) every written frame's quality figures are measured (simbake.qa) and written
+    beside the cache as CACHE.qa.json, summarized in its customLayerData. For a USD shot the
+    cache is a layer of overs; `shot` also writes a stage that sublayers it over the input.
+    """
+    output = Path(output)
+    check_output_path(output, USD_SUFFIXES)
+    shot = Path(shot) if shot is not None else None
+    if scene.shot is not None or shot is not None:
+        _check_shot_outputs(scene, output, shot)
+    start = time.perf_counter()
+    assets = load_assets(scene)
+    cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
+    world = build_world(scene, assets, cloths)
     frame_dt = 1.0 / scene.fps
     total = scene.frame_count
     recorder = QualityRecorder(scene) if qa else None
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
     max_penetration = 0.0
-    with CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
-                     bodies=prims, cloths=cloth_prims, provenance=_provenance(scene)) as writer:
+    with _cache_writer(scene, output, assets, cloths) as writer:
         for frame in range(scene.start_frame, scene.end_frame + 1):
             frame_start = time.perf_counter()
             substeps = 0
@@ -143,6 +186,10 @@ def bake(scene: Scene, output: str | Path, *,
                 on_frame(frame - scene.start_frame + 1, total)
         if recorder is not None:
             writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
+    if shot is not None:
+        from .usd_layer import write_shot_stage
+
+        write_shot_stage(shot, output, scene.shot)
     profile = {**world.profile(), **pipeline_profile}
     sidecar, warnings = None, []
     if recorder is not None:
