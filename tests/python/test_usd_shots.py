@@ -362,3 +362,131 @@ def test_the_command_line_bakes_a_shot_with_a_default_name(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "shot.cache.usdc").is_file()
+
+
+# --------------------------------------------------------------------------------------------
+# shapes and mass
+# --------------------------------------------------------------------------------------------
+
+def _stage(path: Path, *, units: str = "m", up: str = "Y", end: int = 7, gravity: bool = True):
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, up)
+    UsdGeom.SetStageMetersPerUnit(stage, {"m": 1.0, "cm": 0.01}[units])
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(end)
+    stage.SetTimeCodesPerSecond(24)
+    scene = UsdPhysics.Scene.Define(stage, "/PhysicsScene")
+    if not gravity:
+        scene.CreateGravityMagnitudeAttr(0.0)
+    UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(stage.GetPrimAtPath("/World"))
+    return stage
+
+
+def _body(prim, **mass):
+    UsdPhysics.RigidBodyAPI.Apply(prim)
+    UsdPhysics.CollisionAPI.Apply(prim)
+    api = UsdPhysics.MassAPI.Apply(prim)
+    for name, value in mass.items():
+        getattr(api, f"Create{name}Attr")(value)
+    return prim
+
+
+def test_an_authored_centre_of_mass_is_what_spins_in_place(tmp_path):
+    """No gravity, spinning at pi rad/s about +y: the centre of mass (0.1 m off the origin)
+    stays put and the prim's origin circles it."""
+    stage = _stage(tmp_path / "com.usda", gravity=False, end=13)
+    ball = UsdGeom.Sphere.Define(stage, "/World/Ball")
+    ball.CreateRadiusAttr(0.2)
+    ball.AddTranslateOp().Set(pxr.Gf.Vec3d(0, 1, 0))
+    _body(ball.GetPrim(), Mass=2.0, CenterOfMass=pxr.Gf.Vec3f(0.1, 0, 0))
+    UsdPhysics.RigidBodyAPI(ball.GetPrim()).CreateAngularVelocityAttr(pxr.Gf.Vec3f(0, 180, 0))
+    stage.GetRootLayer().Save()
+    scene = simbake.load_scene(tmp_path / "com.usda")
+    assert scene.bodies[0].center_of_mass == pytest.approx((0.1, 0.0, 0.0))
+    assert scene.bodies[0].angular_velocity == pytest.approx((0.0, math.pi, 0.0))
+    cache = tmp_path / "com.cache.usda"
+    simbake.bake(scene, cache, qa=False)
+    composed = Usd.Stage.Open(str(tmp_path / "com.usda"))
+    composed.GetSessionLayer().subLayerPaths.append(str(cache))
+    for frame in (1, 4, 7, 13):
+        angle = math.pi * (frame - 1) / 24
+        r = np.array([[math.cos(angle), 0, math.sin(angle)], [0, 1, 0], [-math.sin(angle), 0, math.cos(angle)]])
+        m = _world(composed, "/World/Ball", frame)
+        # torque-free spin about a principal axis is exact in the core: round-off only
+        np.testing.assert_allclose(m[:3, :3], r, atol=1e-6)
+        np.testing.assert_allclose(m[:3, 3], np.array([0.1, 1.0, 0.0]) - r @ [0.1, 0, 0], atol=1e-6)
+
+
+def test_authored_inertia_converts_units_and_axes(tmp_path):
+    stage = _stage(tmp_path / "inertia.usda", units="cm", up="Z")
+    box = UsdGeom.Cube.Define(stage, "/World/Box")
+    box.CreateSizeAttr(10.0)
+    _body(box.GetPrim(), Mass=3.0, DiagonalInertia=pxr.Gf.Vec3f(1.0, 2.0, 3.0))
+    stage.GetRootLayer().Save()
+    body = simbake.load_scene(tmp_path / "inertia.usda").bodies[0]
+    # kg cm^2 -> kg m^2 (1e-4); the stage's y and z axes become simbake's -z and y
+    np.testing.assert_allclose(body.inertia, np.diag([1e-4, 3e-4, 2e-4]), atol=1e-12)
+    assert body.mass == 3.0 and body.shape.size == pytest.approx((0.1, 0.1, 0.1))
+
+
+def _cube_mesh(stage, path, size, *, open_face=False):
+    h = size / 2
+    points = [(-h, -h, -h), (h, -h, -h), (h, h, -h), (-h, h, -h), (-h, -h, h), (h, -h, h), (h, h, h), (-h, h, h)]
+    faces = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (1, 2, 6, 5), (0, 4, 7, 3)]
+    if open_face:
+        faces = faces[:-1]
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr([pxr.Gf.Vec3f(*p) for p in points])
+    mesh.CreateFaceVertexCountsAttr([4] * len(faces))
+    mesh.CreateFaceVertexIndicesAttr([i for f in faces for i in f])
+    return mesh
+
+
+def test_mesh_capsule_and_cylinder_colliders_become_closed_meshes(tmp_path):
+    import trimesh
+
+    stage = _stage(tmp_path / "shapes.usda", end=3)
+    mesh = _cube_mesh(stage, "/World/Brick", 0.5)
+    mesh.AddTranslateOp().Set(pxr.Gf.Vec3d(0, 1, 0))
+    mesh.AddScaleOp().Set(pxr.Gf.Vec3f(1, 2, 1))
+    _body(mesh.GetPrim(), Density=200.0)
+    can = UsdGeom.Cylinder.Define(stage, "/World/Can")
+    can.CreateRadiusAttr(0.1)
+    can.CreateHeightAttr(0.4)
+    can.CreateAxisAttr("Z")
+    can.AddTranslateOp().Set(pxr.Gf.Vec3d(2, 1, 0))
+    _body(can.GetPrim())
+    pill = UsdGeom.Capsule.Define(stage, "/World/Pill")
+    pill.CreateRadiusAttr(0.1)
+    pill.CreateHeightAttr(0.4)
+    pill.CreateAxisAttr("Y")
+    pill.AddTranslateOp().Set(pxr.Gf.Vec3d(-2, 1, 0))
+    _body(pill.GetPrim())
+    stage.GetRootLayer().Save()
+    scene = simbake.load_scene(tmp_path / "shapes.usda")
+    shapes = {b.name: b.shape for b in scene.bodies}
+    volumes = {}
+    for name, shape in shapes.items():
+        assert shape.kind == "mesh", name
+        m = trimesh.Trimesh(shape.mesh_vertices, shape.mesh_triangles)
+        assert m.is_watertight and m.volume > 0, name
+        volumes[name] = (m.volume, m.bounds)
+    assert volumes["Brick"][0] == pytest.approx(0.5 * 1.0 * 0.5)  # scaled exactly
+    np.testing.assert_allclose(volumes["Brick"][1], [[-0.25, -0.5, -0.25], [0.25, 0.5, 0.25]])
+    # tessellated: 32 sides hold 99.4% of a circle's area, 24 x 24 a sphere's volume to ~1%
+    assert volumes["Can"][0] == pytest.approx(math.pi * 0.01 * 0.4, rel=0.01)
+    np.testing.assert_allclose(volumes["Can"][1][:, 2], [-0.2, 0.2])
+    assert volumes["Pill"][0] == pytest.approx(math.pi * 0.01 * 0.4 + 4 / 3 * math.pi * 0.001, rel=0.015)
+    np.testing.assert_allclose(volumes["Pill"][1][:, 1], [-0.3, 0.3], atol=1e-9)
+    assert scene.bodies[0].density == 200.0
+    assert main(["bake", str(tmp_path / "shapes.usda"), "-o", str(tmp_path / "shapes.cache.usdc"), "-q"]) == 0
+
+
+def test_an_open_collider_mesh_is_an_error(tmp_path, capsys):
+    stage = _stage(tmp_path / "open.usda", end=3)
+    _body(_cube_mesh(stage, "/World/Box", 0.5, open_face=True).GetPrim())
+    stage.GetRootLayer().Save()
+    assert main(["bake", str(tmp_path / "open.usda"), "-o", str(tmp_path / "o.usdc"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "/World/Box.faceVertexIndices: a collider mesh must be closed" in err and err.count("\n") == 1
