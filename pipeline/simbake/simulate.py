@@ -18,6 +18,7 @@ from . import _core, __version__
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import SceneError, SimulationError
 from .files import check_output_path
+from .normals import corner_normals
 from .qa import QualityRecorder
 from .scene import Scene
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim
@@ -111,7 +112,9 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths):
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
-                 face_vertex_indices=asset.triangles.reshape(-1), normals=asset.normals,
+                 face_vertex_indices=asset.triangles.reshape(-1),
+                 normals=corner_normals(asset.vertices, asset.triangles),  # hard edges hard
+                 interpolation="faceVarying",
                  dynamic=(not body.kinematic or bool(body.keys) or any(body.linear_velocity)
                           or any(body.angular_velocity)))
         for body, asset in zip(scene.bodies, assets)

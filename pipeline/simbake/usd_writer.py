@@ -7,7 +7,8 @@ Layout of a cache::
                                 xformOpOrder; time-sampled every frame for a dynamic body,
                                 default values only for a static one
             /mesh               def Mesh, static: points, faceVertexCounts, faceVertexIndices,
-                                normals ("vertex"), extent, subdivisionScheme "none"
+                                normals ("faceVarying", split at creases; or "vertex"),
+                                extent, subdivisionScheme "none"
         /<cloth>                def Mesh: topology once; points, normals, velocities and
                                 extent time-sampled every frame; subdivisionScheme "none"
 
@@ -115,7 +116,9 @@ class BodyPrim:
     """A rigid body: its mesh in its own frame, and whether its pose changes over time.
 
     Arrays are normalised on construction (points/normals float32 (n, 3), topology int32) and
-    validated: shapes, counts summing to the index count, indices within the points.
+    validated: shapes, counts summing to the index count, indices within the points. Normals
+    are per point ("vertex") or per face-vertex ("faceVarying", one per face_vertex_indices
+    entry: hard edges, see simbake.normals), told apart by their count.
     """
 
     name: str
@@ -124,13 +127,20 @@ class BodyPrim:
     face_vertex_indices: np.ndarray
     normals: np.ndarray
     dynamic: bool
+    interpolation: str = ""  # of the normals: "vertex" | "faceVarying"; "" = by their count
 
     def __post_init__(self) -> None:
         _check_name("body", self.name)
         pts = _vec3("body", self.name, "points", self.points)
-        nrm = _vec3("body", self.name, "normals", self.normals, pts.shape[0])
         counts, idx = _topology("body", self.name, self.face_vertex_counts,
                                 self.face_vertex_indices)
+        nrm = _vec3("body", self.name, "normals", self.normals)
+        rows = {"vertex": (pts.shape[0],), "faceVarying": (idx.size,), "": (pts.shape[0], idx.size)}
+        if self.interpolation not in rows:
+            raise ValueError(f"body {self.name!r}: unknown normals interpolation {self.interpolation!r}")
+        if nrm.shape[0] not in rows[self.interpolation]:
+            raise ValueError(f"body {self.name!r}: normals must have one row per point "
+                             f"({pts.shape[0]}) or per face vertex ({idx.size}), got {nrm.shape[0]}")
         if idx.size and idx.max() >= pts.shape[0]:
             raise ValueError(f"body {self.name!r}: face vertex index {int(idx.max())} "
                              f"out of range for {pts.shape[0]} points")
@@ -141,6 +151,15 @@ class BodyPrim:
         object.__setattr__(self, "face_vertex_counts", counts)
         object.__setattr__(self, "face_vertex_indices", idx)
         object.__setattr__(self, "dynamic", bool(self.dynamic))
+
+    @property
+    def normals_interpolation(self) -> str:
+        """"vertex" (one normal per point) or "faceVarying" (one per face vertex)."""
+        if self.interpolation:
+            return self.interpolation
+        if self.normals.shape[0] == self.points.shape[0]:
+            return UsdGeom.Tokens.vertex
+        return UsdGeom.Tokens.faceVarying
 
 
 @dataclass(frozen=True)
@@ -364,7 +383,7 @@ class CacheWriter:
                 self._attr(mesh, "points", _TN.Point3fArray, Vt.Vec3fArray.FromNumpy(body.points))
                 n = self._attr(mesh, "normals", _TN.Normal3fArray,
                                Vt.Vec3fArray.FromNumpy(body.normals))
-                n.SetInfo("interpolation", UsdGeom.Tokens.vertex)
+                n.SetInfo("interpolation", body.normals_interpolation)
                 self._attr(mesh, "extent", _TN.Float3Array, _extent(body.points))
             for cloth in self.cloths:
                 mesh = self._def(world.path, cloth.name, "Mesh")
