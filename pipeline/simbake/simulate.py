@@ -75,6 +75,35 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
     return world
 
 
+@dataclass
+class _FrameState:
+    frame: int
+    translations: np.ndarray            # (bodies, 3) mesh origins (m)
+    orientations: np.ndarray            # (bodies, 4) (w, x, y, z)
+    cloth_points: list                  # per cloth (n, 3) (m)
+    cloth_velocities: list              # per cloth (n, 3) (m/s), the solver's
+    cloth_normals: list                 # per cloth (n, 3)
+
+
+def _frame_state(frame: int, world, cloth_count: int) -> _FrameState:
+    translations, orientations = world.mesh_poses()
+    states = [world.cloth_state(i) for i in range(cloth_count)]
+    return _FrameState(frame, np.array(translations), np.array(orientations),
+                       [np.array(s[0]) for s in states], [np.array(s[1]) for s in states],
+                       [np.array(s[2]) for s in states])
+
+
+def _write_frame(writer, state: _FrameState, following: _FrameState | None, fps: float) -> None:
+    """One frame to the cache. Cloth velocities are the motion over the frame, (x[f+1] - x[f])
+    x fps, so that a renderer's motion blur (points + velocity x time) lands on the next
+    frame's points; the last frame keeps the solver's own velocities."""
+    velocities = state.cloth_velocities
+    if following is not None:
+        velocities = [(b - a) * fps for a, b in zip(state.cloth_points, following.cloth_points)]
+    writer.write_frame(state.frame, state.translations, state.orientations, cloth_points=state.cloth_points,
+                       cloth_velocities=velocities, cloth_normals=state.cloth_normals)
+
+
 def _mass_properties(body, asset: BodyAsset, mass: float) -> dict:
     """The shape's mass properties (at unit density), with an authored centre of mass and
     inertia (a USD shot's PhysicsMassAPI) in their place; the core scales inertia by
@@ -164,6 +193,7 @@ def bake(scene: Scene, output: str | Path, *,
     recorder = QualityRecorder(scene) if qa else None
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
     max_penetration = 0.0
+    pending = None  # the last frame stepped, written once the next one is known
     with _cache_writer(scene, output, assets, cloths) as writer:
         for frame in range(scene.start_frame, scene.end_frame + 1):
             frame_start = time.perf_counter()
@@ -180,13 +210,18 @@ def bake(scene: Scene, output: str | Path, *,
                 recorder.record(frame, world, substeps, measured - frame_start)
                 pipeline_profile["quality"] += time.perf_counter() - measured
             written = time.perf_counter()
-            translations, orientations = world.mesh_poses()
-            states = [world.cloth_state(i) for i in range(len(cloths))]
-            writer.write_frame(frame, translations, orientations, cloth_points=[s[0] for s in states],
-                               cloth_velocities=[s[1] for s in states], cloth_normals=[s[2] for s in states])
+            current = _frame_state(frame, world, len(cloths))
+            if pending is not None:  # the previous frame, its cloth velocities now known
+                _write_frame(writer, pending, current, scene.fps)
+                if on_frame:
+                    on_frame(pending.frame - scene.start_frame + 1, total)
+            pending = current
             pipeline_profile["usd_writer"] += time.perf_counter() - written
-            if on_frame:
-                on_frame(frame - scene.start_frame + 1, total)
+        written = time.perf_counter()
+        _write_frame(writer, pending, None, scene.fps)  # the last frame: its own velocities
+        pipeline_profile["usd_writer"] += time.perf_counter() - written
+        if on_frame:
+            on_frame(total, total)
         if recorder is not None:
             writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
     if shot is not None:

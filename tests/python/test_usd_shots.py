@@ -490,3 +490,34 @@ def test_an_open_collider_mesh_is_an_error(tmp_path, capsys):
     assert main(["bake", str(tmp_path / "open.usda"), "-o", str(tmp_path / "o.usdc"), "-q"]) == 2
     err = capsys.readouterr().err
     assert "/World/Box.faceVertexIndices: a collider mesh must be closed" in err and err.count("\n") == 1
+
+
+def test_cloth_velocities_carry_each_frame_onto_the_next(shipped):
+    """Motion blur: points + velocities / fps is the next frame's points (stage units)."""
+    for name, (cache, _) in shipped.items():
+        layer_stage = Usd.Stage.Open(str(SCENES / f"{name}.usda"))
+        layer_stage.GetSessionLayer().subLayerPaths.append(str(cache))
+        mesh = UsdGeom.Mesh(layer_stage.GetPrimAtPath("/World/Sheet"))
+        unit = 1.0 / UsdGeom.GetStageMetersPerUnit(layer_stage)  # stage units per metre
+        moved = 0.0
+        for frame in range(1, shots.END):
+            p0 = np.array(mesh.GetPointsAttr().Get(frame), dtype=np.float64)
+            p1 = np.array(mesh.GetPointsAttr().Get(frame + 1), dtype=np.float64)
+            v = np.array(mesh.GetVelocitiesAttr().Get(frame), dtype=np.float64)
+            # float32 points a few metres from the origin: ~5e-7 m each
+            np.testing.assert_allclose(p0 + v / 24.0, p1, atol=2e-6 * unit, err_msg=f"{name} {frame}")
+            moved = max(moved, np.abs(p1 - p0).max())
+        assert moved > 0.01 * unit  # it did fall
+
+
+def test_toml_cloth_velocities_carry_each_frame_onto_the_next(tmp_path):
+    toml = tmp_path / "sheet.toml"
+    toml.write_text('[scene]\nend_frame = 8\n\n[[cloths]]\nname = "sheet"\n'
+                    'grid = { size = [1.0, 1.0], resolution = [6, 6] }\nposition = [0.0, 1.0, 0.0]\npinned = [0]\n')
+    simbake.bake(simbake.load_scene(toml), tmp_path / "sheet.usdc", qa=False)
+    stage = Usd.Stage.Open(str(tmp_path / "sheet.usdc"))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/sheet"))
+    for frame in range(1, 8):
+        p0, p1 = (np.array(mesh.GetPointsAttr().Get(f), dtype=np.float64) for f in (frame, frame + 1))
+        v = np.array(mesh.GetVelocitiesAttr().Get(frame), dtype=np.float64)
+        np.testing.assert_allclose(p0 + v / 24.0, p1, atol=1e-6)
