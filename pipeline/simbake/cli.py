@@ -63,7 +63,7 @@ def _print_scene_warnings(scene) -> None:
 
 
 def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
-          shot: str | None = None) -> int:
+          shot: str | None = None, instancing: str = "auto") -> int:
     from .scene import load_scene
 
     scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
@@ -73,7 +73,7 @@ def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = Fals
     output = output or _default_output(scene_path, scene)
     bar, update = _progress(not quiet)
     try:
-        stats = bake(scene, output, on_frame=update, **({"shot": shot} if shot else {}))
+        stats = bake(scene, output, on_frame=update, instancing=instancing, **({"shot": shot} if shot else {}))
     finally:
         if bar is not None:
             bar.close()
@@ -151,6 +151,8 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("-o", "--output", help="output cache (.usdc default, .usda); default SCENE.usdc "
                                           "(a USD shot: SHOT.cache.usdc) here")
     b.add_argument("--shot", help="USD shot only: also write this stage, the cache sublayered over the input")
+    b.add_argument("--instancing", choices=("auto", "always", "never"), default="auto",
+                   help="bodies sharing one shape as a PointInstancer: auto (from 100 bodies), always, never")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     b.add_argument("--preview", action="store_true",
                    help="also write CACHE.mp4 (simbake preview) and CACHE.report.html (simbake report)")
@@ -179,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         if args.command == "bake":
-            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot)
+            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing)
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":

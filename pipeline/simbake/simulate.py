@@ -21,9 +21,12 @@ from .files import check_output_path
 from .normals import corner_normals
 from .qa import QualityRecorder
 from .scene import Scene
-from .usd_writer import BodyPrim, CacheWriter, ClothPrim
+from .usd_instancer import quaternion_rate
+from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
 
 USD_SUFFIXES = (".usdc", ".usda", ".usd")
+INSTANCING_MODES = ("auto", "always", "never")
+INSTANCING_AUTO = 100  # bodies sharing one shape from which "auto" writes a PointInstancer
 
 
 @dataclass
@@ -93,15 +96,26 @@ def _frame_state(frame: int, world, cloth_count: int) -> _FrameState:
                        [np.array(s[2]) for s in states])
 
 
-def _write_frame(writer, state: _FrameState, following: _FrameState | None, fps: float) -> None:
+def _write_frame(writer, state: _FrameState, following: _FrameState | None, fps: float,
+                 previous_rates: list) -> None:
     """One frame to the cache. Cloth velocities are the motion over the frame, (x[f+1] - x[f])
     x fps, so that a renderer's motion blur (points + velocity x time) lands on the next
-    frame's points; the last frame keeps the solver's own velocities."""
+    frame's points; the last frame keeps the solver's own velocities. Bodies' velocities and
+    angular velocities (for PointInstancers) are their poses' motion over the frame too; the
+    last frame repeats the one before (`previous_rates` carries it)."""
     velocities = state.cloth_velocities
     if following is not None:
         velocities = [(b - a) * fps for a, b in zip(state.cloth_points, following.cloth_points)]
+    extra = {}
+    if getattr(writer, "instancer_groups", ()):
+        if following is not None:
+            previous_rates[:] = [(following.translations - state.translations) * fps,
+                                 quaternion_rate(state.orientations, following.orientations, 1.0 / fps)]
+        elif not previous_rates:
+            previous_rates[:] = [np.zeros_like(state.translations), np.zeros_like(state.translations)]
+        extra = {"body_velocities": previous_rates[0], "body_angular_velocities": previous_rates[1]}
     writer.write_frame(state.frame, state.translations, state.orientations, cloth_points=state.cloth_points,
-                       cloth_velocities=velocities, cloth_normals=state.cloth_normals)
+                       cloth_velocities=velocities, cloth_normals=state.cloth_normals, **extra)
 
 
 def _mass_properties(body, asset: BodyAsset, mass: float) -> dict:
@@ -131,7 +145,38 @@ def _provenance(scene: Scene) -> dict:
     }
 
 
-def _cache_writer(scene: Scene, output: Path, assets, cloths):
+def instancer_groups(scene: Scene, instancing: str = "auto") -> list[InstancerGroup]:
+    """Bodies that share one shape (the same primitive and size, or the same mesh file), as
+    PointInstancers: with "always" every shape two or more bodies share, with "auto" those
+    shared by at least INSTANCING_AUTO bodies, with "never" none."""
+    if instancing not in INSTANCING_MODES:
+        raise SceneError(scene.source, "--instancing", f"must be one of {', '.join(INSTANCING_MODES)}, got {instancing!r}")
+    least = {"always": 2, "auto": INSTANCING_AUTO, "never": None}[instancing]
+    if least is None:
+        return []
+    shared: dict = {}
+    for index, body in enumerate(scene.bodies):
+        shape = body.shape
+        if shape.kind == "mesh" and shape.mesh_path is None:
+            continue  # an inline mesh (a USD shot's collider)
+        shared.setdefault((shape.kind, shape.radius, shape.size, shape.mesh_path), []).append(index)
+    names = {b.name for b in scene.bodies} | {c.name for c in scene.cloths}
+    groups = []
+    for (kind, _, _, mesh), members in shared.items():
+        if len(members) < least:
+            continue
+        base = f"{(mesh.stem if mesh is not None else kind)}_instances"
+        base = base if base[:1].isalpha() else f"_{base}"
+        base = "".join(c if c.isalnum() or c == "_" else "_" for c in base)
+        name = base
+        while name in names:
+            name += "_"
+        names.add(name)
+        groups.append(InstancerGroup(name, tuple(members)))
+    return groups
+
+
+def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto"):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
     layer of overs for a USD shot (simbake.usd_layer)."""
     if scene.shot is not None:
@@ -152,7 +197,8 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths):
                              face_vertex_indices=asset.triangles.reshape(-1))
                    for cloth, asset in zip(scene.cloths, cloths)]
     return CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
-                       bodies=prims, cloths=cloth_prims, provenance=_provenance(scene))
+                       bodies=prims, cloths=cloth_prims, provenance=_provenance(scene),
+                       instancers=instancer_groups(scene, instancing))
 
 
 def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
@@ -171,16 +217,19 @@ def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
 
 def bake(scene: Scene, output: str | Path, *,
          on_frame: Callable[[int, int], None] | None = None, qa: bool = True,
-         shot: str | Path | None = None) -> BakeStats:
+         shot: str | Path | None = None, instancing: str = "auto") -> BakeStats:
     """Simulate the scene and stream its USD cache to `output` (appears only when complete).
 
     on_frame(done, total) is called after each written frame (for progress bars). With `qa`
     (the default) every written frame's quality figures are measured (simbake.qa) and written
     beside the cache as CACHE.qa.json, summarized in its customLayerData. For a USD shot the
     cache is a layer of overs; `shot` also writes a stage that sublayers it over the input.
+    `instancing` ("auto", "always", "never"): bodies sharing a shape as PointInstancers
+    (TOML scenes; see instancer_groups).
     """
     output = Path(output)
     check_output_path(output, USD_SUFFIXES)
+    instancer_groups(scene, instancing)  # a bad mode is an error before any work
     shot = Path(shot) if shot is not None else None
     if scene.shot is not None or shot is not None:
         _check_shot_outputs(scene, output, shot)
@@ -194,7 +243,8 @@ def bake(scene: Scene, output: str | Path, *,
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
     max_penetration = 0.0
     pending = None  # the last frame stepped, written once the next one is known
-    with _cache_writer(scene, output, assets, cloths) as writer:
+    rates: list = []  # bodies' velocities over the frame written last
+    with _cache_writer(scene, output, assets, cloths, instancing) as writer:
         for frame in range(scene.start_frame, scene.end_frame + 1):
             frame_start = time.perf_counter()
             substeps = 0
@@ -212,13 +262,13 @@ def bake(scene: Scene, output: str | Path, *,
             written = time.perf_counter()
             current = _frame_state(frame, world, len(cloths))
             if pending is not None:  # the previous frame, its cloth velocities now known
-                _write_frame(writer, pending, current, scene.fps)
+                _write_frame(writer, pending, current, scene.fps, rates)
                 if on_frame:
                     on_frame(pending.frame - scene.start_frame + 1, total)
             pending = current
             pipeline_profile["usd_writer"] += time.perf_counter() - written
         written = time.perf_counter()
-        _write_frame(writer, pending, None, scene.fps)  # the last frame: its own velocities
+        _write_frame(writer, pending, None, scene.fps, rates)  # the last frame: its own velocities
         pipeline_profile["usd_writer"] += time.perf_counter() - written
         if on_frame:
             on_frame(total, total)

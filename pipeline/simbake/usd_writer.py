@@ -62,8 +62,9 @@ import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
 
 from .errors import SimulationError
+from .usd_instancer import InstancerGroup
 
-__all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS"]
+__all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS", "InstancerGroup"]
 
 #: target suffix -> file format the layer is saved in
 FORMATS = {".usdc": "usdc", ".usd": "usdc", ".usda": "usda"}
@@ -286,7 +287,8 @@ class CacheWriter:
 
     def __init__(self, path: str | Path, *, fps: float, start_frame: int, end_frame: int,
                  bodies: Sequence[BodyPrim], cloths: Sequence[ClothPrim] = (),
-                 provenance: Mapping[str, Any] = {}, flush_every: int = 50):
+                 provenance: Mapping[str, Any] = {}, flush_every: int = 50,
+                 instancers: Sequence["InstancerGroup"] = ()):
         self.path = Path(path)
         suffix = self.path.suffix.lower()
         if suffix not in FORMATS:
@@ -321,6 +323,14 @@ class CacheWriter:
         self.fps = fps
         self.start_frame, self.end_frame = start_frame, end_frame
         self.bodies, self.cloths = bodies, cloths
+        self.instancer_groups = tuple(instancers)
+        self._instanced = {i for g in self.instancer_groups for i in g.bodies}
+        taken = set(names)
+        for g in self.instancer_groups:
+            _check_name("instancer", g.name)
+            if g.name in taken or not g.bodies or any(not 0 <= i < len(bodies) for i in g.bodies):
+                raise ValueError(f"instancer {g.name!r}: a duplicate name or bad body indices")
+            taken.add(g.name)
         self.flush_every = int(flush_every)
         self._next_frame = start_frame
         self._since_flush = 0
@@ -371,7 +381,11 @@ class CacheWriter:
         with Sdf.ChangeBlock():
             world = self._def(Sdf.Path.absoluteRootPath, "World", "Xform")
             world.kind = "component"  # the cache is one referenceable asset (a leaf model)
-            for body in self.bodies:
+            for index, body in enumerate(self.bodies):
+                if index in self._instanced:  # drawn by its PointInstancer
+                    self._translate_paths.append(None)
+                    self._orient_paths.append(None)
+                    continue
                 xf = self._def(world.path, body.name, "Xform")
                 t = self._attr(xf, _TRANSLATE, _TN.Double3)
                 o = self._attr(xf, _ORIENT, _TN.Quatd)
@@ -395,11 +409,15 @@ class CacheWriter:
                 v = self._attr(mesh, "velocities", _TN.Vector3fArray)
                 e = self._attr(mesh, "extent", _TN.Float3Array)
                 self._cloth_paths.append((p.path, n.path, v.path, e.path))
+            from .usd_instancer import InstancerSpecs
+
+            self._instancers = InstancerSpecs(self, world.path, self.instancer_groups, self.bodies)
         self._dynamic = [(i, self._translate_paths[i], self._orient_paths[i])
-                         for i, b in enumerate(self.bodies) if b.dynamic]
-        self._static = [i for i, b in enumerate(self.bodies) if not b.dynamic]
-        self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths)
-        self._frame_bytes = 56 * len(self._dynamic)  # filled in for cloths on the first frame
+                         for i, b in enumerate(self.bodies) if b.dynamic and i not in self._instanced]
+        self._static = [i for i, b in enumerate(self.bodies) if not b.dynamic and i not in self._instanced]
+        self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths) + self._instancers.sampled_count
+        # filled in for cloths on the first frame
+        self._frame_bytes = 56 * len(self._dynamic) + self._instancers.frame_bytes()
 
     def _def(self, parent: Sdf.Path, name: str, type_name: str) -> Sdf.PrimSpec:
         spec = Sdf.CreatePrimInLayer(self._layer, parent.AppendChild(name))
@@ -427,7 +445,9 @@ class CacheWriter:
     def write_frame(self, frame: int, translations: np.ndarray, orientations: np.ndarray,
                     cloth_points: Sequence[np.ndarray] = (),
                     cloth_velocities: Sequence[np.ndarray] = (),
-                    cloth_normals: Sequence[np.ndarray] = ()) -> None:
+                    cloth_normals: Sequence[np.ndarray] = (),
+                    body_velocities: np.ndarray | None = None,
+                    body_angular_velocities: np.ndarray | None = None) -> None:
         """Author one frame.
 
         ``translations`` (nbodies, 3): world position of each body's mesh origin;
@@ -435,7 +455,9 @@ class CacheWriter:
         ``bodies``. Static bodies take their pose from the first frame only (a later pose that
         differs is a ``ValueError``). Per cloth: ``cloth_points`` and ``cloth_velocities``
         (metres per second), both (nverts, 3), are required; ``cloth_normals`` may be left
-        empty, in which case area-weighted vertex normals are computed here.
+        empty, in which case area-weighted vertex normals are computed here. With instancers,
+        ``body_velocities`` (m/s, of the mesh origins) and ``body_angular_velocities`` (rad/s,
+        world axes), both (nbodies, 3), are required too.
         Non-finite values raise :class:`simbake.errors.SimulationError`.
         """
         if self._done or self._layer is None:
@@ -457,6 +479,14 @@ class CacheWriter:
             raise SimulationError(f"frame {frame}: body {self.bodies[int(np.argmax(bad))].name!r} "
                                   "has a non-finite pose")
         cloth_data = self._cloth_frame(frame, cloth_points, cloth_velocities, cloth_normals)
+        bv = bw = None
+        if self.instancer_groups:
+            if body_velocities is None or body_angular_velocities is None:
+                raise ValueError(f"frame {frame}: instancers need body_velocities and body_angular_velocities")
+            bv = np.asarray(body_velocities, dtype=np.float64).reshape(nb, 3)
+            bw = np.asarray(body_angular_velocities, dtype=np.float64).reshape(nb, 3)
+            if not (np.isfinite(bv).all() and np.isfinite(bw).all()):
+                raise SimulationError(f"frame {frame}: a body velocity is not finite")
 
         first = frame == self.start_frame
         if not first:
@@ -484,6 +514,8 @@ class CacheWriter:
                         Vec3d(t[0], t[1], t[2])
                     layer.GetAttributeAtPath(self._orient_paths[i]).default = \
                         Quatd(q[0], q[1], q[2], q[3])
+            if self.instancer_groups:
+                self._instancers.write(layer, time, tr, qs, bv, bw)
             for paths, (pts, nrm, vel) in zip(self._cloth_paths, cloth_data):
                 p_path, n_path, v_path, e_path = paths
                 set_sample(p_path, time, from_numpy(pts))
