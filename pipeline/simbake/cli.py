@@ -63,7 +63,7 @@ def _print_scene_warnings(scene) -> None:
 
 
 def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
-          shot: str | None = None, instancing: str = "auto") -> int:
+          shot: str | None = None, instancing: str = "auto", clips: int | None = None) -> int:
     from .scene import load_scene
 
     scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
@@ -73,7 +73,8 @@ def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = Fals
     output = output or _default_output(scene_path, scene)
     bar, update = _progress(not quiet)
     try:
-        stats = bake(scene, output, on_frame=update, instancing=instancing, **({"shot": shot} if shot else {}))
+        stats = bake(scene, output, on_frame=update, instancing=instancing, clips=clips,
+                     **({"shot": shot} if shot else {}))
     finally:
         if bar is not None:
             bar.close()
@@ -153,6 +154,8 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--shot", help="USD shot only: also write this stage, the cache sublayered over the input")
     b.add_argument("--instancing", choices=("auto", "always", "never"), default="auto",
                    help="bodies sharing one shape as a PointInstancer: auto (from 100 bodies), always, never")
+    b.add_argument("--clips", type=int, default=None, metavar="N",
+                   help="write frames into value-clip layers of N frames each in OUT.clips/, stitched by OUT")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     b.add_argument("--preview", action="store_true",
                    help="also write CACHE.mp4 (simbake preview) and CACHE.report.html (simbake report)")
@@ -181,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         if args.command == "bake":
-            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing)
+            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing, args.clips)
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":

@@ -176,7 +176,8 @@ def instancer_groups(scene: Scene, instancing: str = "auto") -> list[InstancerGr
     return groups
 
 
-def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto"):
+def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
+                  clips: int | None = None):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
     layer of overs for a USD shot (simbake.usd_layer)."""
     if scene.shot is not None:
@@ -196,9 +197,14 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
     cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                              face_vertex_indices=asset.triangles.reshape(-1))
                    for cloth, asset in zip(scene.cloths, cloths)]
-    return CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
-                       bodies=prims, cloths=cloth_prims, provenance=_provenance(scene),
-                       instancers=instancer_groups(scene, instancing))
+    settings = dict(fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
+                    bodies=prims, cloths=cloth_prims, provenance=_provenance(scene),
+                    instancers=instancer_groups(scene, instancing))
+    if clips is not None:
+        from .usd_clips import ClipsWriter
+
+        return ClipsWriter(output, clip_frames=clips, **settings)
+    return CacheWriter(output, **settings)
 
 
 def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
@@ -217,7 +223,7 @@ def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
 
 def bake(scene: Scene, output: str | Path, *,
          on_frame: Callable[[int, int], None] | None = None, qa: bool = True,
-         shot: str | Path | None = None, instancing: str = "auto") -> BakeStats:
+         shot: str | Path | None = None, instancing: str = "auto", clips: int | None = None) -> BakeStats:
     """Simulate the scene and stream its USD cache to `output` (appears only when complete).
 
     on_frame(done, total) is called after each written frame (for progress bars). With `qa`
@@ -225,11 +231,17 @@ def bake(scene: Scene, output: str | Path, *,
     beside the cache as CACHE.qa.json, summarized in its customLayerData. For a USD shot the
     cache is a layer of overs; `shot` also writes a stage that sublayers it over the input.
     `instancing` ("auto", "always", "never"): bodies sharing a shape as PointInstancers
-    (TOML scenes; see instancer_groups).
+    (TOML scenes; see instancer_groups). `clips` N: value-clip layers of N frames each in
+    OUTPUT_STEM.clips/, stitched by the output (TOML scenes; simbake.usd_clips).
     """
     output = Path(output)
     check_output_path(output, USD_SUFFIXES)
     instancer_groups(scene, instancing)  # a bad mode is an error before any work
+    if clips is not None:
+        if isinstance(clips, bool) or not isinstance(clips, int) or clips < 1:
+            raise SceneError(scene.source, "--clips", f"must be a whole number of frames >= 1, got {clips!r}")
+        if scene.shot is not None:
+            raise SceneError(scene.source, "--clips", "value clips are written for TOML scenes only (not yet for USD shots)")
     shot = Path(shot) if shot is not None else None
     if scene.shot is not None or shot is not None:
         _check_shot_outputs(scene, output, shot)
@@ -244,7 +256,7 @@ def bake(scene: Scene, output: str | Path, *,
     max_penetration = 0.0
     pending = None  # the last frame stepped, written once the next one is known
     rates: list = []  # bodies' velocities over the frame written last
-    with _cache_writer(scene, output, assets, cloths, instancing) as writer:
+    with _cache_writer(scene, output, assets, cloths, instancing, clips) as writer:
         for frame in range(scene.start_frame, scene.end_frame + 1):
             frame_start = time.perf_counter()
             substeps = 0

@@ -39,7 +39,7 @@ from pxr import Gf, Sdf, Vt
 
 from .errors import SceneError, SimulationError
 from .files import write_atomically
-from .usd_writer import FORMATS, _to_usd, _merge, _remove
+from .usd_writer import FORMATS, StreamingWriter, _to_usd, _merge, _remove
 
 __all__ = ["ShotLayerWriter", "write_shot_stage", "check_not_input"]
 
@@ -100,7 +100,7 @@ def _qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 # the writer
 # --------------------------------------------------------------------------------------------
 
-class ShotLayerWriter:
+class ShotLayerWriter(StreamingWriter):
     """Streams a shot's cache layer to ``path`` (``.usdc``/``.usd`` crate, ``.usda`` text).
 
     The same interface as :class:`simbake.usd_writer.CacheWriter`: frames
@@ -274,15 +274,6 @@ class ShotLayerWriter:
         for p in (self._tmp, self._tmp_text):
             if p is not None:
                 _remove(p)
-
-    def __enter__(self) -> "ShotLayerWriter":
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 # --------------------------------------------------------------------------------------------

@@ -269,7 +269,21 @@ _counter = itertools.count()
 # the writer
 # --------------------------------------------------------------------------------------------
 
-class CacheWriter:
+class StreamingWriter:
+    """A writer used as a context manager: close() when the block ends normally, abort()
+    (nothing written) when it raises. Subclasses define close() and abort()."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class CacheWriter(StreamingWriter):
     """Streams a simbake USD cache (version 1) to ``path``; see the module docstring.
 
     ``path`` ending in ``.usdc`` or ``.usd`` gives a binary crate file, ``.usda`` a text file;
@@ -632,11 +646,3 @@ class CacheWriter:
         self._layer = None
         self._finalizer()  # removes the temp files (once)
 
-    def __enter__(self) -> "CacheWriter":
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
