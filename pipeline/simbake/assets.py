@@ -95,16 +95,22 @@ def automatic_voxel_size(vertices: np.ndarray) -> float:
     return float(min(extent.max() / VOXELS_ACROSS, extent.min() / MIN_VOXELS_THIN))
 
 
-def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
-                   cache: Path | None = None) -> "_core.LevelSet":
-    """The mesh's level set, read from the cache when this mesh and voxel size were baked before."""
+def level_set_cache_path(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
+                         cache: Path | None = None) -> Path:
+    """Where the level set of this mesh at this voxel size is cached (it may not exist yet)."""
     cache = cache_dir() if cache is None else cache
     digest = hashlib.sha256()
     digest.update(CACHE_FORMAT.encode())
     digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
     digest.update(np.ascontiguousarray(triangles, dtype="<i4").tobytes())
     digest.update(repr(float(voxel_size)).encode())
-    path = cache / "levelsets" / f"{digest.hexdigest()}.vdb"
+    return cache / "levelsets" / f"{digest.hexdigest()}.vdb"
+
+
+def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
+                   cache: Path | None = None) -> "_core.LevelSet":
+    """The mesh's level set, read from the cache when this mesh and voxel size were baked before."""
+    path = level_set_cache_path(vertices, triangles, voxel_size, cache)
     if path.is_file():
         try:
             return _core.LevelSet.read(str(path))

@@ -7,6 +7,8 @@ streams them to disk. A non-finite state stops the bake with SimulationError and
 
 from __future__ import annotations
 
+import os
+import secrets
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -176,23 +178,73 @@ def instancer_groups(scene: Scene, instancing: str = "auto") -> list[InstancerGr
     return groups
 
 
+def _level_set_files(scene: Scene, assets, output: Path, groups) -> tuple[dict, Path | None]:
+    """The baked .vdb of each (non-instanced) mesh body, copied into a temporary folder beside
+    the output (renamed to OUTPUT_STEM.vdb/ with it): body index -> its final path."""
+    import shutil
+
+    from .assets import level_set_cache_path
+
+    instanced = {i for g in groups for i in g.bodies}
+    wanted = [(i, b, a) for i, (b, a) in enumerate(zip(scene.bodies, assets))
+              if i not in instanced and a.level_set is not None and a.voxel_size > 0]
+    if not wanted:
+        return {}, None
+    final = output.with_name(f"{output.stem}.vdb")
+    tmp = output.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+    tmp.mkdir()
+    files: dict[int, Path] = {}
+    written: dict[int, str] = {}  # id(level set) -> file name: copies of one mesh share a file
+    for index, body, asset in wanted:
+        name = written.get(id(asset.level_set))
+        if name is None:
+            cached = level_set_cache_path(asset.vertices, asset.triangles, asset.voxel_size)
+            stem = body.shape.mesh_path.stem if body.shape.mesh_path is not None else body.name
+            name = f"{stem}.{cached.stem[:12]}.vdb"
+            if cached.is_file():
+                shutil.copyfile(cached, tmp / name)  # the very file the solver read or baked
+            else:
+                asset.level_set.write(str(tmp / name))
+            written[id(asset.level_set)] = name
+        files[index] = final / name
+    return files, tmp
+
+
+def _move_level_sets(tmp: Path | None, output: Path) -> None:
+    """OUTPUT_STEM.vdb/ into place (an older one replaced); without level sets, none is left."""
+    import shutil
+
+    final = output.with_name(f"{output.stem}.vdb")
+    if tmp is None:
+        return
+    old = None
+    if final.exists():
+        old = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.old")
+        os.replace(final, old)
+    os.replace(tmp, final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
-                  clips: int | None = None):
+                  clips: int | None = None, level_sets: dict | None = None):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
     layer of overs for a USD shot (simbake.usd_layer)."""
     if scene.shot is not None:
         from .usd_layer import ShotLayerWriter
 
         return ShotLayerWriter(output, scene, provenance=_provenance(scene))
+    level_sets = level_sets or {}
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                  face_vertex_indices=asset.triangles.reshape(-1),
                  normals=corner_normals(asset.vertices, asset.triangles),  # hard edges hard
                  interpolation="faceVarying",
+                 level_set=str(level_sets.get(index, "")),
                  dynamic=(not body.kinematic or bool(body.keys) or any(body.linear_velocity)
                           or any(body.angular_velocity)))
-        for body, asset in zip(scene.bodies, assets)
+        for index, (body, asset) in enumerate(zip(scene.bodies, assets))
     ]
     cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                              face_vertex_indices=asset.triangles.reshape(-1))
@@ -219,6 +271,47 @@ def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
         check_not_input(shot, scene, "--shot stage")
         if shot.absolute() == output.absolute():
             raise SceneError(shot, "", "--shot must differ from the cache (-o)")
+
+
+def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profile: dict) -> float:
+    """Step the world frame by frame into `writer`; returns the deepest penetration seen (m).
+    Each frame is written once the next is stepped (its velocities are the motion over it)."""
+    frame_dt = 1.0 / scene.fps
+    total = scene.frame_count
+    max_penetration = 0.0
+    pending = None  # the last frame stepped, written once the next one is known
+    rates: list = []  # bodies' velocities over the frame written last
+    cloth_count = len(scene.cloths)
+    for frame in range(scene.start_frame, scene.end_frame + 1):
+        frame_start = time.perf_counter()
+        substeps = 0
+        if frame > scene.start_frame:
+            substeps = world.step_frame(frame_dt, scene.substeps)
+            stats = world.statistics()
+            if not stats["finite"]:
+                raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
+                                      "nothing was written (try more [solver] substeps)")
+            max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
+        if recorder is not None:
+            measured = time.perf_counter()
+            recorder.record(frame, world, substeps, measured - frame_start)
+            pipeline_profile["quality"] += time.perf_counter() - measured
+        written = time.perf_counter()
+        current = _frame_state(frame, world, cloth_count)
+        if pending is not None:  # the previous frame, its cloth velocities now known
+            _write_frame(writer, pending, current, scene.fps, rates)
+            if on_frame:
+                on_frame(pending.frame - scene.start_frame + 1, total)
+        pending = current
+        pipeline_profile["usd_writer"] += time.perf_counter() - written
+    written = time.perf_counter()
+    _write_frame(writer, pending, None, scene.fps, rates)  # the last frame: its own velocities
+    pipeline_profile["usd_writer"] += time.perf_counter() - written
+    if on_frame:
+        on_frame(total, total)
+    if recorder is not None:
+        writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
+    return max_penetration
 
 
 def bake(scene: Scene, output: str | Path, *,
@@ -249,43 +342,21 @@ def bake(scene: Scene, output: str | Path, *,
     assets = load_assets(scene)
     cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
     world = build_world(scene, assets, cloths)
-    frame_dt = 1.0 / scene.fps
     total = scene.frame_count
     recorder = QualityRecorder(scene) if qa else None
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
-    max_penetration = 0.0
-    pending = None  # the last frame stepped, written once the next one is known
-    rates: list = []  # bodies' velocities over the frame written last
-    with _cache_writer(scene, output, assets, cloths, instancing, clips) as writer:
-        for frame in range(scene.start_frame, scene.end_frame + 1):
-            frame_start = time.perf_counter()
-            substeps = 0
-            if frame > scene.start_frame:
-                substeps = world.step_frame(frame_dt, scene.substeps)
-                stats = world.statistics()
-                if not stats["finite"]:
-                    raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
-                                          "nothing was written (try more [solver] substeps)")
-                max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
-            if recorder is not None:
-                measured = time.perf_counter()
-                recorder.record(frame, world, substeps, measured - frame_start)
-                pipeline_profile["quality"] += time.perf_counter() - measured
-            written = time.perf_counter()
-            current = _frame_state(frame, world, len(cloths))
-            if pending is not None:  # the previous frame, its cloth velocities now known
-                _write_frame(writer, pending, current, scene.fps, rates)
-                if on_frame:
-                    on_frame(pending.frame - scene.start_frame + 1, total)
-            pending = current
-            pipeline_profile["usd_writer"] += time.perf_counter() - written
-        written = time.perf_counter()
-        _write_frame(writer, pending, None, scene.fps, rates)  # the last frame: its own velocities
-        pipeline_profile["usd_writer"] += time.perf_counter() - written
-        if on_frame:
-            on_frame(total, total)
-        if recorder is not None:
-            writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
+    level_sets, level_set_tmp = ({}, None) if scene.shot is not None else \
+        _level_set_files(scene, assets, output, instancer_groups(scene, instancing))
+    try:
+        with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets) as writer:
+            max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile)
+    except BaseException:
+        if level_set_tmp is not None:
+            import shutil
+
+            shutil.rmtree(level_set_tmp, ignore_errors=True)
+        raise
+    _move_level_sets(level_set_tmp, output)
     if shot is not None:
         from .usd_layer import write_shot_stage
 

@@ -129,6 +129,7 @@ class BodyPrim:
     normals: np.ndarray
     dynamic: bool
     interpolation: str = ""  # of the normals: "vertex" | "faceVarying"; "" = by their count
+    level_set: str = ""  # the .vdb the solver used (absolute path), shown as a guide Volume
 
     def __post_init__(self) -> None:
         _check_name("body", self.name)
@@ -413,6 +414,8 @@ class CacheWriter(StreamingWriter):
                                Vt.Vec3fArray.FromNumpy(body.normals))
                 n.SetInfo("interpolation", body.normals_interpolation)
                 self._attr(mesh, "extent", _TN.Float3Array, _extent(body.points))
+                if body.level_set:
+                    self._level_set_volume(xf, body)
             for cloth in self.cloths:
                 mesh = self._def(world.path, cloth.name, "Mesh")
                 self._mesh_topology(mesh, cloth.face_vertex_counts, cloth.face_vertex_indices)
@@ -432,6 +435,21 @@ class CacheWriter(StreamingWriter):
         self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths) + self._instancers.sampled_count
         # filled in for cloths on the first frame
         self._frame_bytes = 56 * len(self._dynamic) + self._instancers.frame_bytes()
+
+    def _level_set_volume(self, xf: Sdf.PrimSpec, body: BodyPrim) -> None:
+        """levelset: a guide Volume whose OpenVDBAsset field is the body's .vdb (grid "surface"),
+        by a path relative to this file, in the body's (mesh origin's) frame."""
+        volume = self._def(xf.path, "levelset", "Volume")
+        self._attr(volume, "purpose", _TN.Token, UsdGeom.Tokens.guide, uniform=True)
+        field = self._def(volume.path, "surface", "OpenVDBAsset")
+        relative = os.path.relpath(body.level_set, self.path.parent.absolute())
+        self._attr(field, "filePath", _TN.Asset, Sdf.AssetPath(relative if relative.startswith("..")
+                                                                 else f"./{relative}"))
+        self._attr(field, "fieldName", _TN.Token, "surface")
+        rel = Sdf.RelationshipSpec(volume, "field:surface", custom=False)
+        rel.targetPathList.explicitItems = [field.path]
+        points = body.points.astype(np.float64)  # the grid's narrow band hugs the surface
+        self._attr(volume, "extent", _TN.Float3Array, _extent(points.astype(np.float32)))
 
     def _def(self, parent: Sdf.Path, name: str, type_name: str) -> Sdf.PrimSpec:
         spec = Sdf.CreatePrimInLayer(self._layer, parent.AppendChild(name))
