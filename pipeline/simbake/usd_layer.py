@@ -148,7 +148,7 @@ class ShotLayerWriter(StreamingWriter):
             q_name, q_type = _QUAT.get(b.op_types.get(_ORIENT, "quatf"), _QUAT["quatf"])
             Sdf.AttributeSpec(spec, _TRANSLATE, t_name)
             Sdf.AttributeSpec(spec, _ORIENT, q_name)
-            order = [_TRANSLATE, _ORIENT]
+            order = (["!resetXformStack!"] if b.reset_xform_stack else []) + [_TRANSLATE, _ORIENT]
             if b.scale is not None:
                 s_name, s_type = _VEC3.get(b.op_types.get(_SCALE, "float3"), _VEC3["float3"])
                 Sdf.AttributeSpec(spec, _SCALE, s_name).default = s_type(*b.scale)
@@ -163,6 +163,10 @@ class ShotLayerWriter(StreamingWriter):
         self._parent_t = np.array([b.parent_translation for b in shot.bodies], dtype=np.float64).reshape(count, 3)
         self._parent_s = np.array([b.parent_scale for b in shot.bodies], dtype=np.float64).reshape(count, 1)
         self._index = np.array([b.index for b in shot.bodies], dtype=np.int64)
+        # animated parents: (row, rotations (frames, 4), translations (frames, 3), scales (frames, 1))
+        self._tracks = [(row, np.array([f[0] for f in b.parent_track]), np.array([f[1] for f in b.parent_track]),
+                         np.array([[f[2]] for f in b.parent_track]))
+                        for row, b in enumerate(shot.bodies) if b.parent_track]
 
         self._cloths = []  # (cloth index, world_to_local 4x4, local_to_world 3x3, paths)
         for c in shot.cloths:
@@ -196,10 +200,16 @@ class ShotLayerWriter(StreamingWriter):
         t_world = translations[self._index] @ C / mpu  # rows: C^T t / mpu
         qc = np.array(shot.axes_quaternion)[None, :]
         q_world = _qmul(_qmul(_qconj(qc), orientations[self._index]), qc)  # qC^-1 q qC
-        parent_inv = _qconj(self._parent_q)
+        parent_q, parent_t, parent_s = self._parent_q, self._parent_t, self._parent_s
+        if self._tracks:  # parents that move: their pose at this frame
+            parent_q, parent_t, parent_s = parent_q.copy(), parent_t.copy(), parent_s.copy()
+            k = frame - self.start_frame
+            for row, qs, ts, ss in self._tracks:
+                parent_q[row], parent_t[row], parent_s[row] = qs[k], ts[k], ss[k]
+        parent_inv = _qconj(parent_q)
         q_local = _qmul(parent_inv, q_world)
         q_local /= np.linalg.norm(q_local, axis=1, keepdims=True)
-        t_local = _qrotate(parent_inv, t_world - self._parent_t) / self._parent_s
+        t_local = _qrotate(parent_inv, t_world - parent_t) / parent_s
 
         cloth_data = []
         for index, to_local, to_world3, paths in self._cloths:

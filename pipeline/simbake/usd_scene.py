@@ -59,6 +59,12 @@ class ShotBody:
     parent_scale: float        # the parent's uniform world scale
     scale: tuple | None        # the prim's own local scale, None when (1, 1, 1)
     op_types: dict = field(default_factory=dict)  # xformOp name -> the input's value type name
+    # under another dynamic body (whose pose the cache changes): world-space ops after
+    # !resetXformStack! (the parent_* fields are then the identity)
+    reset_xform_stack: bool = False
+    # an animated parent: its (rotation (w, x, y, z), translation, uniform scale) at every
+    # time code from the start, in place of the parent_* fields
+    parent_track: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -307,6 +313,8 @@ class _Reader:
                 self.warn(p, "filtered collision pairs are not simulated by simbake; left out")
 
         gravity = self._gravity(descs.get(T.Scene, []))
+        self.dynamic_paths = {str(p) for p, d in descs.get(T.RigidBody, [])
+                              if d.rigidBodyEnabled and not d.kinematicBody}
         used_names: set[str] = set()
         bodies: list[Body] = []
         shot_bodies: list[ShotBody] = []
@@ -591,13 +599,22 @@ class _Reader:
         from pxr import UsdGeom
 
         parent = prim.GetParent()
-        m = self.world(parent) if parent and not parent.IsPseudoRoot() else np.eye(4)
-        parts = _rotation_and_scale(m[:3, :3])
-        if parts is None or np.ptp(parts[1]) > _TOL * parts[1].max():
-            raise self.error(parent.GetPath(), "xformOpOrder",
-                             "the parent of a dynamic rigid body must have a rotation and a uniform "
-                             "scale (the cache overrides the body's own transform under it)")
-        sigma = float(parts[1].mean())
+        ancestors = []
+        p = parent
+        while p and not p.IsPseudoRoot():
+            ancestors.append(p)
+            p = p.GetParent()
+        reset = any(str(a.GetPath()) in self.dynamic_paths for a in ancestors)
+        animated = not reset and any(UsdGeom.Xformable(a) and UsdGeom.Xformable(a).TransformMightBeTimeVarying()
+                                     for a in ancestors)
+        m = self.world(parent) if ancestors and not reset else np.eye(4)
+        q, t, sigma = self._similarity(parent, m)
+        track = ()
+        if animated:
+            from pxr import Usd
+
+            track = tuple(self._similarity(parent, self.world(parent, Usd.TimeCode(code)))
+                          for code in range(int(self.start), int(self.end) + 1))
         scale = world_scale / sigma
         ops = {}
         for op in UsdGeom.Xformable(prim).GetOrderedXformOps():
@@ -607,11 +624,20 @@ class _Reader:
             if attr and attr.GetTypeName():
                 ops[name] = str(attr.GetTypeName())
         return ShotBody(index=index, prim_path=str(prim.GetPath()),
-                        parent_rotation=_quat_from_matrix(parts[0]), parent_translation=_vec(m[:3, 3]),
-                        parent_scale=sigma,
+                        parent_rotation=q, parent_translation=t, parent_scale=sigma,
+                        reset_xform_stack=reset, parent_track=track,
                         scale=None if np.abs(scale - 1).max() <= _TOL else _vec(scale),
                         op_types={n: ops[n] for n in ("xformOp:translate", "xformOp:orient", "xformOp:scale")
                                   if n in ops})
+
+    def _similarity(self, parent, m: np.ndarray):
+        """(rotation quaternion, translation, uniform scale) of a parent's world transform."""
+        parts = _rotation_and_scale(m[:3, :3])
+        if parts is None or np.ptp(parts[1]) > _TOL * parts[1].max():
+            raise self.error(parent.GetPath(), "xformOpOrder",
+                             "the parent of a dynamic rigid body must have a rotation and a uniform "
+                             "scale (the cache overrides the body's own transform under it)")
+        return _quat_from_matrix(parts[0]), _vec(m[:3, 3]), float(parts[1].mean())
 
     def _mass(self, prim, colliders, r, k, material_density):
         """(mass kg | None, density kg/m^3 | None, centre of mass, inertia) from PhysicsMassAPI:

@@ -521,3 +521,38 @@ def test_toml_cloth_velocities_carry_each_frame_onto_the_next(tmp_path):
         p0, p1 = (np.array(mesh.GetPointsAttr().Get(f), dtype=np.float64) for f in (frame, frame + 1))
         v = np.array(mesh.GetVelocitiesAttr().Get(frame), dtype=np.float64)
         np.testing.assert_allclose(p0 + v / 24.0, p1, atol=1e-6)
+
+
+def test_bodies_under_a_moving_parent_or_another_body_fall_freely(tmp_path):
+    """A ball under an animated Xform (the cart moves 2 m in x) and a ball under another
+    dynamic body: composed over the input, both fall straight down, whatever their parents do."""
+    stage = _stage(tmp_path / "nested.usda", end=7)
+    cart = UsdGeom.Xform.Define(stage, "/World/Cart")
+    op = cart.AddTranslateOp()
+    op.Set(pxr.Gf.Vec3d(0, 0, 0), 1)
+    op.Set(pxr.Gf.Vec3d(2, 0, 0), 7)
+    cart.AddRotateYOp().Set(30.0)
+    ball = UsdGeom.Sphere.Define(stage, "/World/Cart/Ball")
+    ball.CreateRadiusAttr(0.1)
+    ball.AddTranslateOp().Set(pxr.Gf.Vec3d(0, 2, 0))
+    _body(ball.GetPrim())
+    crate = UsdGeom.Cube.Define(stage, "/World/Crate")
+    crate.CreateSizeAttr(0.2)
+    crate.AddTranslateOp().Set(pxr.Gf.Vec3d(5, 3, 0))
+    _body(crate.GetPrim())
+    rider = UsdGeom.Sphere.Define(stage, "/World/Crate/Rider")
+    rider.CreateRadiusAttr(0.05)
+    rider.AddTranslateOp().Set(pxr.Gf.Vec3d(0, 1, 0))
+    _body(rider.GetPrim())
+    stage.GetRootLayer().Save()
+    assert main(["bake", str(tmp_path / "nested.usda"), "-o", str(tmp_path / "c.usda"),
+                 "--shot", str(tmp_path / "s.usda"), "-q"]) == 0
+    composed = Usd.Stage.Open(str(tmp_path / "s.usda"))
+    for path, start in (("/World/Cart/Ball", [0, 2, 0]), ("/World/Crate/Rider", [5, 4, 0]), ("/World/Crate", [5, 3, 0])):
+        for frame in range(1, 8):
+            t, dt = (frame - 1) / 24, 1 / 240  # semi-implicit Euler, 10 substeps a frame
+            m = _world(composed, path, frame)
+            np.testing.assert_allclose(m[:3, 3], np.array(start) + [0, -0.5 * 9.81 * t * (t + dt), 0], atol=1e-6,
+                                       err_msg=f"{path} at {frame}")
+    layer = Sdf.Layer.FindOrOpen(str(tmp_path / "c.usda"))
+    assert list(layer.GetAttributeAtPath("/World/Crate/Rider.xformOpOrder").default)[0] == "!resetXformStack!"
