@@ -28,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pxr import Gf, Sdf, Vt
+from pxr import Sdf, Vt
 
 __all__ = ["InstancerGroup", "InstancerSpecs", "quaternion_rate"]
 
@@ -90,7 +90,8 @@ class InstancerSpecs:
         for idx, paths, reach in self._paths:
             p = np.ascontiguousarray(translations[idx], dtype=np.float32)
             q = orientations[idx]
-            quats = Vt.QuathArray([Gf.Quath(float(w), float(x), float(y), float(z)) for w, x, y, z in q.tolist()])
+            # GfQuath is laid out (i, j, k, real) in memory
+            quats = Vt.QuathArray.FromNumpy(np.ascontiguousarray(q[:, [1, 2, 3, 0]], dtype=np.float16))
             layer.SetTimeSample(paths["positions"], time, Vt.Vec3fArray.FromNumpy(p))
             layer.SetTimeSample(paths["orientations"], time, quats)
             layer.SetTimeSample(paths["velocities"], time, Vt.Vec3fArray.FromNumpy(
