@@ -1,7 +1,7 @@
 """simbake: bake level sets, rigid bodies and cloth into time-sampled USD caches.
 
     import simbake
-    scene = simbake.load_scene("scene.toml")   # raises simbake.SceneError on bad input
+    scene = simbake.load_scene("scene.toml")   # or a USD shot; raises simbake.SceneError on bad input
     stats = simbake.bake(scene, "out.usdc")
 """
 
@@ -9,6 +9,10 @@ from __future__ import annotations
 
 from .errors import SceneError, SimulationError
 from .scene import Scene, load_scene
+
+from .usd_schema import register as _register_usd_schemas
+
+_register_usd_schemas()  # SimbakeClothAPI, before any stage is opened (see usd_schema.py)
 
 __version__ = "0.1.0"
 __all__ = ["Scene", "SceneError", "SimulationError", "bake", "load_scene", "__version__"]

@@ -139,18 +139,24 @@ def write_level_set(level_set: "_core.LevelSet", path: Path, metadata: dict[str,
     write_atomically(Path(path), write, verify)
 
 
-def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
-                   cache: Path | None = None) -> "_core.LevelSet":
-    """The mesh's level set, read from the cache when this mesh and voxel size were baked
-    before (and the entry says so), else baked and stored."""
+def level_set_cache_path(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
+                         cache: Path | None = None) -> Path:
+    """Where the level set of this mesh at this voxel size is cached (it may not exist yet)."""
     cache = cache_dir() if cache is None else cache
     digest = hashlib.sha256()
     digest.update(CACHE_FORMAT.encode())
     digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
     digest.update(np.ascontiguousarray(triangles, dtype="<i4").tobytes())
     digest.update(repr(float(voxel_size)).encode())
-    key = digest.hexdigest()
-    path = cache / "levelsets" / f"{key}.vdb"
+    return cache / "levelsets" / f"{digest.hexdigest()}.vdb"
+
+
+def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
+                   cache: Path | None = None) -> "_core.LevelSet":
+    """The mesh's level set, read from the cache when this mesh and voxel size were baked
+    before (and the entry says so), else baked and stored."""
+    path = level_set_cache_path(vertices, triangles, voxel_size, cache)
+    key = path.stem
     if path.is_file():
         try:
             entry = _core.LevelSet.read(str(path))
@@ -188,7 +194,9 @@ def load_body(scene: Scene, index: int, body: Body, with_level_set: bool,
               shared: dict | None = None) -> BodyAsset:
     """One body's geometry; `shared` maps (mesh file, voxel size) to an asset already loaded
     for another body, so a pile of copies of one mesh holds one grid, not one per body."""
-    memo_key = (body.shape.mesh_path, body.voxel_size, with_level_set) if body.shape.kind == "mesh" else None
+    memo_key = None
+    if body.shape.kind == "mesh" and body.shape.mesh_path is not None:
+        memo_key = (body.shape.mesh_path, body.voxel_size, with_level_set)
     if shared is not None and memo_key in shared:
         return shared[memo_key]
     asset = _load_body(scene, index, body, with_level_set)
@@ -211,11 +219,16 @@ def _load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bo
         props = _core.box_mass_properties(np.array(shape.size))
         level_set = _core.LevelSet.box(np.array(shape.size))
     else:
-        vertices, triangles = load_mesh(shape.mesh_path, file, f"{key}.mesh")
+        if shape.mesh_vertices is not None:  # inline (a USD shot's collider, checked closed)
+            vertices = np.ascontiguousarray(shape.mesh_vertices, dtype=np.float64)
+            triangles = np.ascontiguousarray(shape.mesh_triangles, dtype=np.int32)
+            file, key = (file, shape.mesh_source) if shape.mesh_source else (file, key)
+        else:
+            vertices, triangles = load_mesh(shape.mesh_path, file, f"{key}.mesh")
         try:
             props = _core.mass_properties(vertices, triangles)
         except ValueError as error:
-            raise SceneError(file, f"{key}.mesh", f"{shape.mesh_path}: {error}") from None
+            raise SceneError(file, f"{key}.mesh", f"{shape.mesh_path or 'collider mesh'}: {error}") from None
         level_set = None
         if with_level_set:
             voxel_size = body.voxel_size or automatic_voxel_size(vertices)
@@ -272,6 +285,9 @@ def _rotate(q: tuple[float, float, float, float], points: np.ndarray) -> np.ndar
 def load_cloth(scene: Scene, index: int) -> ClothAsset:
     cloth = scene.cloths[index]
     key, file = f"cloths[{index}]", scene.source or str(scene.path)
+    if cloth.mesh_vertices is not None:  # a USD shot's mesh: world rest positions already
+        return ClothAsset(np.ascontiguousarray(cloth.mesh_vertices, dtype=np.float64),
+                          np.ascontiguousarray(cloth.mesh_triangles, dtype=np.int32))
     if cloth.mesh_path is not None:
         # the file's vertex order is kept: `pinned` indexes the file's vertices
         mesh = read_triangles(cloth.mesh_path, file, f"{key}.mesh", process=False)

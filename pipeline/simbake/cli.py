@@ -1,6 +1,7 @@
 """The simbake command line.
 
     simbake bake SCENE.toml [-o OUT.usdc] [--quiet]   progress on stderr, summary at the end
+    simbake bake SHOT.usda [-o CACHE.usdc] [--shot OUT.usda]   a USD shot: a cache layer of overs
     simbake demo [-o OUT.usdc] [--quiet]              bakes the shipped default scene
     simbake check OUT.usdc                            validates a cache
     simbake preview CACHE.usdc [-o OUT.png|.mp4|.gif] renders it headless (contact sheet or movie)
@@ -50,16 +51,31 @@ def _progress(enabled: bool):
     return bar, update
 
 
-def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False) -> int:
+def _default_output(scene_path: str, scene) -> str:
+    """SCENE.usdc here; a USD shot's cache SHOT.cache.usdc (never the shot itself)."""
+    stem = Path(scene_path).stem
+    return f"{stem}.cache.usdc" if scene.shot is not None else f"{stem}.usdc"
+
+
+def _print_scene_warnings(scene) -> None:
+    """What loading a USD shot left out (joints, ...), once per prim path."""
+    for line in scene.warnings:
+        print(f"simbake: warning: {line}", file=sys.stderr)
+
+
+def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
+          shot: str | None = None, instancing: str = "auto", clips: int | None = None) -> int:
     from .scene import load_scene
 
     scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
+    _print_scene_warnings(scene)
     from .simulate import bake
 
-    output = output or f"{Path(scene_path).stem}.usdc"
+    output = output or _default_output(scene_path, scene)
     bar, update = _progress(not quiet)
     try:
-        stats = bake(scene, output, on_frame=update)
+        stats = bake(scene, output, on_frame=update, instancing=instancing, clips=clips,
+                     **({"shot": shot} if shot else {}))
     finally:
         if bar is not None:
             bar.close()
@@ -135,8 +151,14 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"simbake {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bake", help="simulate a scene file into a USD cache")
-    b.add_argument("scene", help="scene file (.toml)")
-    b.add_argument("-o", "--output", help="output cache (.usdc default, .usda); default SCENE.usdc here")
+    b.add_argument("scene", help="scene file (.toml) or USD shot (.usd, .usda, .usdc)")
+    b.add_argument("-o", "--output", help="output cache (.usdc default, .usda); default SCENE.usdc "
+                                          "(a USD shot: SHOT.cache.usdc) here")
+    b.add_argument("--shot", help="USD shot only: also write this stage, the cache sublayered over the input")
+    b.add_argument("--instancing", choices=("auto", "always", "never"), default="auto",
+                   help="bodies sharing one shape as a PointInstancer: auto (from 100 bodies), always, never")
+    b.add_argument("--clips", type=int, default=None, metavar="N",
+                   help="write frames into value-clip layers of N frames each in OUT.clips/, stitched by OUT")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     b.add_argument("--preview", action="store_true",
                    help="also write CACHE.mp4 (simbake preview) and CACHE.report.html (simbake report)")
@@ -171,7 +193,7 @@ def _main(argv: list[str] | None) -> int:
     args = parser().parse_args(argv)
     try:
         if args.command == "bake":
-            return _bake(args.scene, args.output, args.quiet, args.preview)
+            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing, args.clips)
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":

@@ -233,6 +233,8 @@ def _plain(value: Any) -> Any:
         return [_plain(v) for v in value]
     if isinstance(value, Path):
         return str(value)
+    if hasattr(value, "shape") and hasattr(value, "dtype"):  # an inline mesh (a USD shot's)
+        return f"array of shape {list(value.shape)}"
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
     return value

@@ -38,7 +38,7 @@ import math
 import os
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
@@ -75,6 +75,11 @@ class Shape:
     radius: float = 0.0  # sphere
     size: Vec3 = ZERO3  # box: full edge lengths
     mesh_path: Path | None = None  # mesh: absolute path
+    # mesh given inline (a USD shot's collider): (n, 3) float64 (m), (m, 3) int32, read-only,
+    # closed; mesh_source names it (a prim path) for messages and level-set sharing
+    mesh_vertices: Any = field(default=None, compare=False, repr=False)
+    mesh_triangles: Any = field(default=None, compare=False, repr=False)
+    mesh_source: str = ""
 
 
 @dataclass(frozen=True)
@@ -112,6 +117,9 @@ class Body:
     kinematic: bool = False
     voxel_size: float = 0.0  # 0: automatic
     keys: tuple[Key, ...] = ()  # kinematic only: the path it follows, times increasing
+    center_of_mass: Vec3 | None = None  # in the mesh's frame (m); None: the shape's centroid
+    inertia: tuple[Vec3, Vec3, Vec3] | None = None  # about the centre of mass, mesh frame (kg m^2)
+    prim_path: str = ""  # a USD shot's body: its prim, for messages
 
 
 @dataclass(frozen=True)
@@ -137,6 +145,10 @@ class Cloth:
     poisson_ratio: float = 0.3      # membrane only
     integrator: str = "implicit"    # implicit (backward Euler) | explicit
     self_collision: bool = True     # kept from passing through itself (at `thickness`)
+    # a USD shot's cloth mesh, inline: (n, 3) float64 world rest positions (m), (m, 3) int32
+    mesh_vertices: Any = field(default=None, compare=False, repr=False)
+    mesh_triangles: Any = field(default=None, compare=False, repr=False)
+    prim_path: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,6 +165,8 @@ class Scene:
     ground: Ground | None = None
     bodies: tuple[Body, ...] = ()
     cloths: tuple[Cloth, ...] = ()
+    warnings: tuple[str, ...] = ()  # what loading left out or changed, one line each
+    shot: Any = None  # a USD shot's simbake.usd_scene.ShotInfo (for its cache layer); else None
 
     @property
     def frame_count(self) -> int:
@@ -160,20 +174,23 @@ class Scene:
         return self.end_frame - self.start_frame + 1
 
     def hash(self) -> str:
-        """SHA-256 (hex) over the scene file and every mesh file it references.
+        """SHA-256 (hex) over the scene file and every mesh file it references (a USD shot:
+        every layer its stage used, in sorted order).
 
         Files are read now, in a fixed order: the scene file, then the meshes in order of
         first reference (bodies, then cloths), each once. Each file contributes its own
         SHA-256 digest, so file boundaries cannot be confused.
         """
         digest = hashlib.sha256()
-        for path in (self.path, *self._mesh_paths()):
+        for path in self.input_files():
             digest.update(_file_digest(path))
         return digest.hexdigest()
 
     def input_files(self) -> tuple[Path, ...]:
-        """Every file a bake of this scene reads: the scene file, then its meshes."""
-        return (self.path, *self._mesh_paths())
+        """Every file a bake of this scene reads: the scene file (a USD shot: every layer its
+        stage used, in sorted order), then its meshes."""
+        layers = tuple(Path(p) for p in self.shot.layers) if self.shot is not None else (self.path,)
+        return (*layers, *self._mesh_paths())
 
     def _mesh_paths(self) -> tuple[Path, ...]:
         paths = [b.shape.mesh_path for b in self.bodies] + [c.mesh_path for c in self.cloths]
@@ -215,9 +232,17 @@ _CLOTH_KEYS = (
 _GRID_KEYS = ("size", "resolution")
 
 
+USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
 def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Read and validate a scene file; raise :class:`SceneError` on any problem."""
+    """Read and validate a scene file (TOML, or a USD shot: .usd, .usda, .usdc); raise
+    :class:`SceneError` on any problem."""
     file = os.fspath(path)  # named in messages exactly as the user gave it
+    if Path(file).suffix.lower() in USD_SCENE_SUFFIXES:
+        from .usd_scene import load_shot  # pxr is loaded only for USD shots
+
+        return load_shot(path)
     # Canonical directory (no "..", as the OS would walk it), but the file's own name is
     # kept, so a symlinked scene file finds meshes beside the link, as USD layers do.
     given = Path(file).absolute()

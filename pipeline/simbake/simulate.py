@@ -7,6 +7,8 @@ streams them to disk. A non-finite state stops the bake with SimulationError and
 
 from __future__ import annotations
 
+import os
+import secrets
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,11 +21,15 @@ from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
 from .limits import check_budget, check_scene
+from .normals import corner_normals
 from .qa import QualityRecorder, qa_path
 from .scene import Scene
-from .usd_writer import BodyPrim, CacheWriter, ClothPrim
+from .usd_instancer import quaternion_rate
+from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
 
 USD_SUFFIXES = (".usdc", ".usda", ".usd")
+INSTANCING_MODES = ("auto", "always", "never")
+INSTANCING_AUTO = 100  # bodies sharing one shape from which "auto" writes a PointInstancer
 
 
 @dataclass
@@ -53,7 +59,7 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
         volume = asset.mass_properties["volume"]
         mass = body.mass if body.mass is not None else body.density * volume
         try:
-            world.add_body(asset.level_set, asset.samples, asset.mass_properties, mass,
+            world.add_body(asset.level_set, asset.samples, _mass_properties(body, asset, mass), mass,
                            np.array(body.position), np.array(body.orientation),
                            np.array(body.linear_velocity), np.array(body.angular_velocity),
                            body.friction, body.restitution, body.kinematic)
@@ -75,6 +81,60 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
     return world
 
 
+@dataclass
+class _FrameState:
+    frame: int
+    translations: np.ndarray            # (bodies, 3) mesh origins (m)
+    orientations: np.ndarray            # (bodies, 4) (w, x, y, z)
+    cloth_points: list                  # per cloth (n, 3) (m)
+    cloth_velocities: list              # per cloth (n, 3) (m/s), the solver's
+    cloth_normals: list                 # per cloth (n, 3)
+
+
+def _frame_state(frame: int, world, cloth_count: int) -> _FrameState:
+    translations, orientations = world.mesh_poses()
+    states = [world.cloth_state(i) for i in range(cloth_count)]
+    return _FrameState(frame, np.array(translations), np.array(orientations),
+                       [np.array(s[0]) for s in states], [np.array(s[1]) for s in states],
+                       [np.array(s[2]) for s in states])
+
+
+def _write_frame(writer, state: _FrameState, following: _FrameState | None, fps: float,
+                 previous_rates: list) -> None:
+    """One frame to the cache. Cloth velocities are the motion over the frame, (x[f+1] - x[f])
+    x fps, so that a renderer's motion blur (points + velocity x time) lands on the next
+    frame's points; the last frame keeps the solver's own velocities. Bodies' velocities and
+    angular velocities (for PointInstancers) are their poses' motion over the frame too; the
+    last frame repeats the one before (`previous_rates` carries it)."""
+    velocities = state.cloth_velocities
+    if following is not None:
+        velocities = [(b - a) * fps for a, b in zip(state.cloth_points, following.cloth_points)]
+    extra = {}
+    if getattr(writer, "instancer_groups", ()):
+        if following is not None:
+            previous_rates[:] = [(following.translations - state.translations) * fps,
+                                 quaternion_rate(state.orientations, following.orientations, 1.0 / fps)]
+        elif not previous_rates:
+            previous_rates[:] = [np.zeros_like(state.translations), np.zeros_like(state.translations)]
+        extra = {"body_velocities": previous_rates[0], "body_angular_velocities": previous_rates[1]}
+    writer.write_frame(state.frame, state.translations, state.orientations, cloth_points=state.cloth_points,
+                       cloth_velocities=velocities, cloth_normals=state.cloth_normals, **extra)
+
+
+def _mass_properties(body, asset: BodyAsset, mass: float) -> dict:
+    """The shape's mass properties (at unit density), with an authored centre of mass and
+    inertia (a USD shot's PhysicsMassAPI) in their place; the core scales inertia by
+    mass / volume, so an authored inertia I goes in as I * volume / mass."""
+    if body.center_of_mass is None and body.inertia is None:
+        return asset.mass_properties
+    props = dict(asset.mass_properties)
+    if body.center_of_mass is not None:
+        props["center"] = np.array(body.center_of_mass, dtype=np.float64)
+    if body.inertia is not None:
+        props["inertia"] = np.array(body.inertia, dtype=np.float64) * props["volume"] / mass
+    return props
+
+
 def _provenance(scene: Scene) -> dict:
     return {
         "simbake": {
@@ -88,38 +148,208 @@ def _provenance(scene: Scene) -> dict:
     }
 
 
+def _moves(body) -> bool:
+    """A body whose pose changes over the bake (dynamic, keyed or kinematic with a velocity)."""
+    return not body.kinematic or bool(body.keys) or any(body.linear_velocity) or any(body.angular_velocity)
+
+
+def instancer_groups(scene: Scene, instancing: str = "auto") -> list[InstancerGroup]:
+    """Bodies that share one shape (the same primitive and size, or the same mesh file), as
+    PointInstancers: with "always" every shape two or more bodies share, with "auto" those
+    shared by at least INSTANCING_AUTO bodies, with "never" none."""
+    if instancing not in INSTANCING_MODES:
+        raise SceneError(scene.source, "--instancing", f"must be one of {', '.join(INSTANCING_MODES)}, got {instancing!r}")
+    least = {"always": 2, "auto": INSTANCING_AUTO, "never": None}[instancing]
+    if least is None:
+        return []
+    shared: dict = {}
+    for index, body in enumerate(scene.bodies):
+        shape = body.shape
+        if shape.kind == "mesh" and shape.mesh_path is None:
+            continue  # an inline mesh (a USD shot's collider)
+        shared.setdefault((shape.kind, shape.radius, shape.size, shape.mesh_path), []).append(index)
+    names = {b.name for b in scene.bodies} | {c.name for c in scene.cloths}
+    groups = []
+    for (kind, _, _, mesh), members in shared.items():
+        if len(members) < least:
+            continue
+        base = f"{(mesh.stem if mesh is not None else kind)}_instances"
+        base = base if base[:1].isalpha() else f"_{base}"
+        base = "".join(c if c.isalnum() or c == "_" else "_" for c in base)
+        name = base
+        while name in names:
+            name += "_"
+        names.add(name)
+        groups.append(InstancerGroup(name, tuple(members)))
+    return groups
+
+
+def _level_set_files(scene: Scene, assets, output: Path, groups) -> tuple[dict, Path | None]:
+    """The baked .vdb of each (non-instanced) mesh body, copied into a temporary folder beside
+    the output (renamed to OUTPUT_STEM.vdb/ with it): body index -> its final path."""
+    import shutil
+
+    from .assets import level_set_cache_path
+
+    instanced = {i for g in groups for i in g.bodies}
+    wanted = [(i, b, a) for i, (b, a) in enumerate(zip(scene.bodies, assets))
+              if i not in instanced and a.level_set is not None and a.voxel_size > 0]
+    if not wanted:
+        return {}, None
+    final = output.with_name(f"{output.stem}.vdb")
+    tmp = output.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+    tmp.mkdir()
+    files: dict[int, Path] = {}
+    written: dict[int, str] = {}  # id(level set) -> file name: copies of one mesh share a file
+    for index, body, asset in wanted:
+        name = written.get(id(asset.level_set))
+        if name is None:
+            cached = level_set_cache_path(asset.vertices, asset.triangles, asset.voxel_size)
+            stem = body.shape.mesh_path.stem if body.shape.mesh_path is not None else body.name
+            name = f"{stem}.{cached.stem[:12]}.vdb"
+            if cached.is_file():
+                shutil.copyfile(cached, tmp / name)  # the very file the solver read or baked
+            else:
+                asset.level_set.write(str(tmp / name))
+            written[id(asset.level_set)] = name
+        files[index] = final / name
+    return files, tmp
+
+
+def _move_level_sets(tmp: Path | None, output: Path) -> None:
+    """OUTPUT_STEM.vdb/ into place (an older one replaced); without level sets, none is left."""
+    import shutil
+
+    final = output.with_name(f"{output.stem}.vdb")
+    if tmp is None:
+        return
+    old = None
+    if final.exists():
+        old = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.old")
+        os.replace(final, old)
+    os.replace(tmp, final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
+                  clips: int | None = None, level_sets: dict | None = None):
+    """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
+    layer of overs for a USD shot (simbake.usd_layer)."""
+    if scene.shot is not None:
+        from .usd_layer import ShotLayerWriter
+
+        return ShotLayerWriter(output, scene, provenance=_provenance(scene))
+    level_sets = level_sets or {}
+    prims = [
+        BodyPrim(name=body.name, points=asset.vertices,
+                 face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
+                 face_vertex_indices=asset.triangles.reshape(-1),
+                 normals=corner_normals(asset.vertices, asset.triangles),  # hard edges hard
+                 interpolation="faceVarying",
+                 level_set=str(level_sets.get(index, "")),
+                 dynamic=_moves(body))
+        for index, (body, asset) in enumerate(zip(scene.bodies, assets))
+    ]
+    cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
+                             face_vertex_indices=asset.triangles.reshape(-1))
+                   for cloth, asset in zip(scene.cloths, cloths)]
+    settings = dict(fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
+                    bodies=prims, cloths=cloth_prims, provenance=_provenance(scene),
+                    instancers=instancer_groups(scene, instancing))
+    if clips is not None:
+        from .usd_clips import ClipsWriter
+
+        return ClipsWriter(output, clip_frames=clips, **settings)
+    return CacheWriter(output, **settings)
+
+
+def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
+    """--shot needs a USD shot, and its stage is neither the cache nor any input layer."""
+    if shot is not None:
+        if scene.shot is None:
+            raise SceneError(shot, "", "--shot needs a USD shot as input (.usd, .usda, .usdc)")
+        check_output_path(shot, USD_SUFFIXES, inputs=scene.input_files())
+        if shot.absolute() == output.absolute():
+            raise SceneError(shot, "", "--shot must differ from the cache (-o)")
+
+
+def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profile: dict) -> float:
+    """Step the world frame by frame into `writer`; returns the deepest penetration seen (m).
+    Each frame is written once the next is stepped (its velocities are the motion over it)."""
+    frame_dt = 1.0 / scene.fps
+    total = scene.frame_count
+    max_penetration = 0.0
+    pending = None  # the last frame stepped, written once the next one is known
+    rates: list = []  # bodies' velocities over the frame written last
+    cloth_count = len(scene.cloths)
+    for frame in range(scene.start_frame, scene.end_frame + 1):
+        frame_start = time.perf_counter()
+        substeps = 0
+        if frame > scene.start_frame:
+            substeps = world.step_frame(frame_dt, scene.substeps)
+            stats = world.statistics()
+            if not stats["finite"]:
+                raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
+                                      "nothing was written (try more [solver] substeps)")
+            max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
+        if recorder is not None:
+            measured = time.perf_counter()
+            recorder.record(frame, world, substeps, measured - frame_start)
+            pipeline_profile["quality"] += time.perf_counter() - measured
+        written = time.perf_counter()
+        current = _frame_state(frame, world, cloth_count)
+        if pending is not None:  # the previous frame, its cloth velocities now known
+            _write_frame(writer, pending, current, scene.fps, rates)
+            if on_frame:
+                on_frame(pending.frame - scene.start_frame + 1, total)
+        pending = current
+        pipeline_profile["usd_writer"] += time.perf_counter() - written
+    written = time.perf_counter()
+    _write_frame(writer, pending, None, scene.fps, rates)  # the last frame: its own velocities
+    pipeline_profile["usd_writer"] += time.perf_counter() - written
+    if on_frame:
+        on_frame(total, total)
+    if recorder is not None:
+        writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
+    return max_penetration
+
+
 def bake(scene: Scene, output: str | Path, *,
-         on_frame: Callable[[int, int], None] | None = None, qa: bool = True) -> BakeStats:
+         on_frame: Callable[[int, int], None] | None = None, qa: bool = True,
+         shot: str | Path | None = None, instancing: str = "auto", clips: int | None = None) -> BakeStats:
     """Simulate the scene and stream its USD cache to `output` (appears only when complete).
 
     on_frame(done, total) is called after each written frame (for progress bars). With `qa`
     (the default) every written frame's quality figures are measured (simbake.qa) and written
-    beside the cache as CACHE.qa.json, summarized in its customLayerData.
+    beside the cache as CACHE.qa.json, summarized in its customLayerData. For a USD shot the
+    cache is a layer of overs; `shot` also writes a stage that sublayers it over the input.
+    `instancing` ("auto", "always", "never"): bodies sharing a shape as PointInstancers
+    (TOML scenes; see instancer_groups). `clips` N: value-clip layers of N frames each in
+    OUTPUT_STEM.clips/, stitched by the output (TOML scenes; simbake.usd_clips).
     """
     output = Path(output)
     check_scene(scene)  # a Scene made in Python (or from USD) meets the same range as a file's
     check_output_path(output, USD_SUFFIXES, inputs=scene.input_files())
     if qa:
         check_output_path(qa_path(output), (".json",), inputs=scene.input_files())
+    instancer_groups(scene, instancing)  # a bad mode is an error before any work
+    if clips is not None:
+        if isinstance(clips, bool) or not isinstance(clips, int) or clips < 1:
+            raise SceneError(scene.source, "--clips", f"must be a whole number of frames >= 1, got {clips!r}")
+        if scene.shot is not None:
+            raise SceneError(scene.source, "--clips", "value clips are written for TOML scenes only (not yet for USD shots)")
+    shot = Path(shot) if shot is not None else None
+    if scene.shot is not None or shot is not None:
+        _check_shot_outputs(scene, output, shot)
     start = time.perf_counter()
     assets = load_assets(scene)
     cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
     world = build_world(scene, assets, cloths)
-    prims = [
-        BodyPrim(name=body.name, points=asset.vertices,
-                 face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
-                 face_vertex_indices=asset.triangles.reshape(-1), normals=asset.normals,
-                 dynamic=(not body.kinematic or bool(body.keys) or any(body.linear_velocity)
-                          or any(body.angular_velocity)))
-        for body, asset in zip(scene.bodies, assets)
-    ]
-    cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
-                             face_vertex_indices=asset.triangles.reshape(-1))
-                   for cloth, asset in zip(scene.cloths, cloths)]
     check_budget(scene, output, scene.substeps or world.automatic_substeps(1.0 / scene.fps),
-                 sum(p.dynamic for p in prims), [len(c.vertices) for c in cloths])
+                 sum(_moves(body) for body in scene.bodies), [len(c.vertices) for c in cloths])
     try:
-        return _bake(scene, output, world, assets, cloths, prims, cloth_prims, on_frame, qa, start)
+        return _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, instancing, clips)
     except Exception as error:
         if isinstance(error, (SceneError, SimulationError, OutputError)) or not _write_failure(error):
             raise
@@ -131,38 +361,26 @@ def _write_failure(error: Exception) -> bool:
     return isinstance(error, OSError) or type(error).__name__ == "ErrorException"
 
 
-def _bake(scene, output, world, assets, cloths, prims, cloth_prims, on_frame, qa, start) -> BakeStats:
-    frame_dt = 1.0 / scene.fps
+def _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, instancing, clips) -> BakeStats:
     total = scene.frame_count
     recorder = QualityRecorder(scene) if qa else None
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
-    max_penetration = 0.0
-    with CacheWriter(output, fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
-                     bodies=prims, cloths=cloth_prims, provenance=_provenance(scene)) as writer:
-        for frame in range(scene.start_frame, scene.end_frame + 1):
-            frame_start = time.perf_counter()
-            substeps = 0
-            if frame > scene.start_frame:
-                substeps = world.step_frame(frame_dt, scene.substeps)
-                stats = world.statistics()
-                if not stats["finite"]:
-                    raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
-                                          "nothing was written (try more [solver] substeps)")
-                max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
-            if recorder is not None:
-                measured = time.perf_counter()
-                recorder.record(frame, world, substeps, measured - frame_start)
-                pipeline_profile["quality"] += time.perf_counter() - measured
-            written = time.perf_counter()
-            translations, orientations = world.mesh_poses()
-            states = [world.cloth_state(i) for i in range(len(cloths))]
-            writer.write_frame(frame, translations, orientations, cloth_points=[s[0] for s in states],
-                               cloth_velocities=[s[1] for s in states], cloth_normals=[s[2] for s in states])
-            pipeline_profile["usd_writer"] += time.perf_counter() - written
-            if on_frame:
-                on_frame(frame - scene.start_frame + 1, total)
-        if recorder is not None:
-            writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
+    level_sets, level_set_tmp = ({}, None) if scene.shot is not None else \
+        _level_set_files(scene, assets, output, instancer_groups(scene, instancing))
+    try:
+        with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets) as writer:
+            max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile)
+    except BaseException:
+        if level_set_tmp is not None:
+            import shutil
+
+            shutil.rmtree(level_set_tmp, ignore_errors=True)
+        raise
+    _move_level_sets(level_set_tmp, output)
+    if shot is not None:
+        from .usd_layer import write_shot_stage
+
+        write_shot_stage(shot, output, scene.shot)
     profile = {**world.profile(), **pipeline_profile}
     sidecar, warnings = None, []
     if recorder is not None:

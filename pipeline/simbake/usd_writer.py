@@ -7,7 +7,8 @@ Layout of a cache::
                                 xformOpOrder; time-sampled every frame for a dynamic body,
                                 default values only for a static one
             /mesh               def Mesh, static: points, faceVertexCounts, faceVertexIndices,
-                                normals ("vertex"), extent, subdivisionScheme "none"
+                                normals ("faceVarying", split at creases; or "vertex"),
+                                extent, subdivisionScheme "none"
         /<cloth>                def Mesh: topology once; points, normals, velocities and
                                 extent time-sampled every frame; subdivisionScheme "none"
 
@@ -62,8 +63,9 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
 
 from .errors import SimulationError
 from .files import commit, remove_if_present as _remove, remove_stale_temps
+from .usd_instancer import InstancerGroup
 
-__all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS"]
+__all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS", "InstancerGroup"]
 
 #: target suffix -> file format the layer is saved in
 FORMATS = {".usdc": "usdc", ".usd": "usdc", ".usda": "usda"}
@@ -116,7 +118,9 @@ class BodyPrim:
     """A rigid body: its mesh in its own frame, and whether its pose changes over time.
 
     Arrays are normalised on construction (points/normals float32 (n, 3), topology int32) and
-    validated: shapes, counts summing to the index count, indices within the points.
+    validated: shapes, counts summing to the index count, indices within the points. Normals
+    are per point ("vertex") or per face-vertex ("faceVarying", one per face_vertex_indices
+    entry: hard edges, see simbake.normals), told apart by their count.
     """
 
     name: str
@@ -125,13 +129,21 @@ class BodyPrim:
     face_vertex_indices: np.ndarray
     normals: np.ndarray
     dynamic: bool
+    interpolation: str = ""  # of the normals: "vertex" | "faceVarying"; "" = by their count
+    level_set: str = ""  # the .vdb the solver used (absolute path), shown as a guide Volume
 
     def __post_init__(self) -> None:
         _check_name("body", self.name)
         pts = _vec3("body", self.name, "points", self.points)
-        nrm = _vec3("body", self.name, "normals", self.normals, pts.shape[0])
         counts, idx = _topology("body", self.name, self.face_vertex_counts,
                                 self.face_vertex_indices)
+        nrm = _vec3("body", self.name, "normals", self.normals)
+        rows = {"vertex": (pts.shape[0],), "faceVarying": (idx.size,), "": (pts.shape[0], idx.size)}
+        if self.interpolation not in rows:
+            raise ValueError(f"body {self.name!r}: unknown normals interpolation {self.interpolation!r}")
+        if nrm.shape[0] not in rows[self.interpolation]:
+            raise ValueError(f"body {self.name!r}: normals must have one row per point "
+                             f"({pts.shape[0]}) or per face vertex ({idx.size}), got {nrm.shape[0]}")
         if idx.size and idx.max() >= pts.shape[0]:
             raise ValueError(f"body {self.name!r}: face vertex index {int(idx.max())} "
                              f"out of range for {pts.shape[0]} points")
@@ -142,6 +154,15 @@ class BodyPrim:
         object.__setattr__(self, "face_vertex_counts", counts)
         object.__setattr__(self, "face_vertex_indices", idx)
         object.__setattr__(self, "dynamic", bool(self.dynamic))
+
+    @property
+    def normals_interpolation(self) -> str:
+        """"vertex" (one normal per point) or "faceVarying" (one per face vertex)."""
+        if self.interpolation:
+            return self.interpolation
+        if self.normals.shape[0] == self.points.shape[0]:
+            return UsdGeom.Tokens.vertex
+        return UsdGeom.Tokens.faceVarying
 
 
 @dataclass(frozen=True)
@@ -243,7 +264,21 @@ _counter = itertools.count()
 # the writer
 # --------------------------------------------------------------------------------------------
 
-class CacheWriter:
+class StreamingWriter:
+    """A writer used as a context manager: close() when the block ends normally, abort()
+    (nothing written) when it raises. Subclasses define close() and abort()."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class CacheWriter(StreamingWriter):
     """Streams a simbake USD cache (version 1) to ``path``; see the module docstring.
 
     ``path`` ending in ``.usdc`` or ``.usd`` gives a binary crate file, ``.usda`` a text file;
@@ -261,7 +296,8 @@ class CacheWriter:
 
     def __init__(self, path: str | Path, *, fps: float, start_frame: int, end_frame: int,
                  bodies: Sequence[BodyPrim], cloths: Sequence[ClothPrim] = (),
-                 provenance: Mapping[str, Any] = {}, flush_every: int = 50):
+                 provenance: Mapping[str, Any] = {}, flush_every: int = 50,
+                 instancers: Sequence["InstancerGroup"] = ()):
         self.path = Path(path)
         suffix = self.path.suffix.lower()
         if suffix not in FORMATS:
@@ -296,6 +332,14 @@ class CacheWriter:
         self.fps = fps
         self.start_frame, self.end_frame = start_frame, end_frame
         self.bodies, self.cloths = bodies, cloths
+        self.instancer_groups = tuple(instancers)
+        self._instanced = {i for g in self.instancer_groups for i in g.bodies}
+        taken = set(names)
+        for g in self.instancer_groups:
+            _check_name("instancer", g.name)
+            if g.name in taken or not g.bodies or any(not 0 <= i < len(bodies) for i in g.bodies):
+                raise ValueError(f"instancer {g.name!r}: a duplicate name or bad body indices")
+            taken.add(g.name)
         self.flush_every = int(flush_every)
         self._next_frame = start_frame
         self._since_flush = 0
@@ -348,7 +392,11 @@ class CacheWriter:
         with Sdf.ChangeBlock():
             world = self._def(Sdf.Path.absoluteRootPath, "World", "Xform")
             world.kind = "component"  # the cache is one referenceable asset (a leaf model)
-            for body in self.bodies:
+            for index, body in enumerate(self.bodies):
+                if index in self._instanced:  # drawn by its PointInstancer
+                    self._translate_paths.append(None)
+                    self._orient_paths.append(None)
+                    continue
                 xf = self._def(world.path, body.name, "Xform")
                 t = self._attr(xf, _TRANSLATE, _TN.Double3)
                 o = self._attr(xf, _ORIENT, _TN.Quatd)
@@ -360,8 +408,10 @@ class CacheWriter:
                 self._attr(mesh, "points", _TN.Point3fArray, Vt.Vec3fArray.FromNumpy(body.points))
                 n = self._attr(mesh, "normals", _TN.Normal3fArray,
                                Vt.Vec3fArray.FromNumpy(body.normals))
-                n.SetInfo("interpolation", UsdGeom.Tokens.vertex)
+                n.SetInfo("interpolation", body.normals_interpolation)
                 self._attr(mesh, "extent", _TN.Float3Array, _extent(body.points))
+                if body.level_set:
+                    self._level_set_volume(xf, body)
             for cloth in self.cloths:
                 mesh = self._def(world.path, cloth.name, "Mesh")
                 self._mesh_topology(mesh, cloth.face_vertex_counts, cloth.face_vertex_indices)
@@ -372,11 +422,30 @@ class CacheWriter:
                 v = self._attr(mesh, "velocities", _TN.Vector3fArray)
                 e = self._attr(mesh, "extent", _TN.Float3Array)
                 self._cloth_paths.append((p.path, n.path, v.path, e.path))
+            from .usd_instancer import InstancerSpecs
+
+            self._instancers = InstancerSpecs(self, world.path, self.instancer_groups, self.bodies)
         self._dynamic = [(i, self._translate_paths[i], self._orient_paths[i])
-                         for i, b in enumerate(self.bodies) if b.dynamic]
-        self._static = [i for i, b in enumerate(self.bodies) if not b.dynamic]
-        self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths)
-        self._frame_bytes = 56 * len(self._dynamic)  # filled in for cloths on the first frame
+                         for i, b in enumerate(self.bodies) if b.dynamic and i not in self._instanced]
+        self._static = [i for i, b in enumerate(self.bodies) if not b.dynamic and i not in self._instanced]
+        self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths) + self._instancers.sampled_count
+        # filled in for cloths on the first frame
+        self._frame_bytes = 56 * len(self._dynamic) + self._instancers.frame_bytes()
+
+    def _level_set_volume(self, xf: Sdf.PrimSpec, body: BodyPrim) -> None:
+        """levelset: a guide Volume whose OpenVDBAsset field is the body's .vdb (grid "surface"),
+        by a path relative to this file, in the body's (mesh origin's) frame."""
+        volume = self._def(xf.path, "levelset", "Volume")
+        self._attr(volume, "purpose", _TN.Token, UsdGeom.Tokens.guide, uniform=True)
+        field = self._def(volume.path, "surface", "OpenVDBAsset")
+        relative = os.path.relpath(body.level_set, self.path.parent.absolute())
+        self._attr(field, "filePath", _TN.Asset, Sdf.AssetPath(relative if relative.startswith("..")
+                                                                 else f"./{relative}"))
+        self._attr(field, "fieldName", _TN.Token, "surface")
+        rel = Sdf.RelationshipSpec(volume, "field:surface", custom=False)
+        rel.targetPathList.explicitItems = [field.path]
+        points = body.points.astype(np.float64)  # the grid's narrow band hugs the surface
+        self._attr(volume, "extent", _TN.Float3Array, _extent(points.astype(np.float32)))
 
     def _def(self, parent: Sdf.Path, name: str, type_name: str) -> Sdf.PrimSpec:
         spec = Sdf.CreatePrimInLayer(self._layer, parent.AppendChild(name))
@@ -404,7 +473,9 @@ class CacheWriter:
     def write_frame(self, frame: int, translations: np.ndarray, orientations: np.ndarray,
                     cloth_points: Sequence[np.ndarray] = (),
                     cloth_velocities: Sequence[np.ndarray] = (),
-                    cloth_normals: Sequence[np.ndarray] = ()) -> None:
+                    cloth_normals: Sequence[np.ndarray] = (),
+                    body_velocities: np.ndarray | None = None,
+                    body_angular_velocities: np.ndarray | None = None) -> None:
         """Author one frame.
 
         ``translations`` (nbodies, 3): world position of each body's mesh origin;
@@ -412,7 +483,9 @@ class CacheWriter:
         ``bodies``. Static bodies take their pose from the first frame only (a later pose that
         differs is a ``ValueError``). Per cloth: ``cloth_points`` and ``cloth_velocities``
         (metres per second), both (nverts, 3), are required; ``cloth_normals`` may be left
-        empty, in which case area-weighted vertex normals are computed here.
+        empty, in which case area-weighted vertex normals are computed here. With instancers,
+        ``body_velocities`` (m/s, of the mesh origins) and ``body_angular_velocities`` (rad/s,
+        world axes), both (nbodies, 3), are required too.
         Non-finite values raise :class:`simbake.errors.SimulationError`.
         """
         if self._done or self._layer is None:
@@ -434,6 +507,14 @@ class CacheWriter:
             raise SimulationError(f"frame {frame}: body {self.bodies[int(np.argmax(bad))].name!r} "
                                   "has a non-finite pose")
         cloth_data = self._cloth_frame(frame, cloth_points, cloth_velocities, cloth_normals)
+        bv = bw = None
+        if self.instancer_groups:
+            if body_velocities is None or body_angular_velocities is None:
+                raise ValueError(f"frame {frame}: instancers need body_velocities and body_angular_velocities")
+            bv = np.asarray(body_velocities, dtype=np.float64).reshape(nb, 3)
+            bw = np.asarray(body_angular_velocities, dtype=np.float64).reshape(nb, 3)
+            if not (np.isfinite(bv).all() and np.isfinite(bw).all()):
+                raise SimulationError(f"frame {frame}: a body velocity is not finite")
 
         first = frame == self.start_frame
         if not first:
@@ -461,6 +542,8 @@ class CacheWriter:
                         Vec3d(t[0], t[1], t[2])
                     layer.GetAttributeAtPath(self._orient_paths[i]).default = \
                         Quatd(q[0], q[1], q[2], q[3])
+            if self.instancer_groups:
+                self._instancers.write(layer, time, tr, qs, bv, bw)
             for paths, (pts, nrm, vel) in zip(self._cloth_paths, cloth_data):
                 p_path, n_path, v_path, e_path = paths
                 set_sample(p_path, time, from_numpy(pts))
@@ -577,11 +660,3 @@ class CacheWriter:
         self._layer = None
         self._finalizer()  # removes the temp files (once)
 
-    def __enter__(self) -> "CacheWriter":
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()

@@ -173,7 +173,8 @@ def test_default_output_is_scene_name_in_the_working_directory(write_scene, mesh
     """, "scenes/drop.toml")
     result = simbake("bake", "../scenes/drop.toml", cwd=work)
     assert result.returncode == 0, result.stderr
-    assert listing(work) == ["drop.qa.json", "drop.usdc"]     # in the cwd, named after the scene...
+    # in the cwd, named after the scene (with the bracket's level set beside it)...
+    assert listing(work) == ["drop.qa.json", "drop.usdc", "drop.vdb"]
     assert listing(scenes) == ["drop.toml", "lshape.obj"]     # ...not beside the scene file
     assert (work / "drop.usdc").read_bytes().startswith(b"PXR-USDC")
     assert "drop.usdc" in result.stdout

@@ -200,7 +200,10 @@ MIXED_SCENE = """
 
 def test_bake_is_deterministic(write_scene, meshes, tmp_path, simbake_cache_dir):
     scene_path = write_scene(MIXED_SCENE)
-    a, b = tmp_path / "a.usdc", tmp_path / "b.usdc"
+    # the same name in two folders: the cache refers to its level sets as ./cache.vdb/...
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a, b = tmp_path / "a" / "cache.usdc", tmp_path / "b" / "cache.usdc"
     bake_file(scene_path, a)       # cold: the torus grid is baked in memory
     assert levelset_files(simbake_cache_dir), "the torus grid should have been cached"
     bake_file(scene_path, b)       # warm: the torus grid is read back from the .vdb
@@ -252,7 +255,9 @@ def test_levelset_cache_is_reused(write_scene, meshes, tmp_path, simbake_cache_d
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "empty"])
 def test_corrupt_levelset_cache_is_rebaked(write_scene, meshes, tmp_path, simbake_cache_dir, damage):
     scene_path = write_scene(LEVELSET_SCENE.format(ring_voxel=0.0))
-    good = tmp_path / "good.usdc"
+    (tmp_path / "good").mkdir()
+    (tmp_path / "again").mkdir()
+    good = tmp_path / "good" / "cache.usdc"  # one name: the cache refers to ./cache.vdb/...
     bake_file(scene_path, good)
     files = sorted((simbake_cache_dir / "levelsets").iterdir())
     originals = {p: p.read_bytes() for p in files}
@@ -264,7 +269,7 @@ def test_corrupt_levelset_cache_is_rebaked(write_scene, meshes, tmp_path, simbak
         else:
             p.write_bytes(b"")
 
-    again = tmp_path / "again.usdc"
+    again = tmp_path / "again" / "cache.usdc"
     bake_file(scene_path, again)
     # the damaged entries were baked again and replaced by readable grids, not trusted...
     for p in files:

@@ -1,0 +1,152 @@
+"""Long shots as value clips (``--clips N``): frames go into clip layers of N frames each.
+
+Beside the output ``CACHE.usdc`` the bake writes ``CACHE.clips/``::
+
+    clip.0001.usdc ...      a complete cache (usd_writer.CacheWriter) of frames
+                            [start + k N, start + (k + 1) N], one frame shared with the next
+                            clip so that times between two clips interpolate as in one file
+    topology.usdc           everything but the time samples (UsdUtils.StitchClipsTopology)
+    manifest.usda           which attributes the clips sample (UsdUtils.StitchClipsManifest)
+
+and the output itself is a small layer: the stage metadata, provenance and QA summary, the
+topology as a sublayer, and ``clips`` metadata on ``/World`` (``assetPaths``, ``active``,
+``times``: the identity, ``manifestAssetPath``, ``primPath``) that stitch the clips together. Opening it
+reads back the same values at every frame as a single-file cache. Each clip is written and
+closed before the next begins, so memory does not grow with the length of the shot. The
+clip folder is written beside under a temporary name and renamed into place with the output.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import shutil
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from pxr import Sdf, UsdUtils, Vt
+
+from .usd_writer import CacheWriter, StreamingWriter, _merge, _to_usd
+
+__all__ = ["ClipsWriter"]
+
+
+class ClipsWriter(StreamingWriter):
+    """The interface of :class:`CacheWriter`, writing clip layers of ``clip_frames`` frames."""
+
+    def __init__(self, path: str | Path, *, clip_frames: int, fps: float, start_frame: int,
+                 end_frame: int, bodies: Sequence, cloths: Sequence = (),
+                 provenance: Mapping[str, Any] = {}, instancers: Sequence = ()):
+        if int(clip_frames) < 1:
+            raise ValueError(f"clip_frames must be >= 1, got {clip_frames}")
+        self.path = Path(path)
+        self.clip_frames = int(clip_frames)
+        self.start_frame, self.end_frame = int(start_frame), int(end_frame)
+        self.instancer_groups = tuple(instancers)
+        self._args = dict(fps=fps, bodies=bodies, cloths=cloths, provenance=provenance, instancers=instancers)
+        self._fps = float(fps)
+        self._provenance = dict(provenance)
+        self._layer_data: dict = {}
+        self.folder = self.path.with_name(f"{self.path.stem}.clips")
+        self._tmp = self.path.with_name(f".{self.folder.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+        self._tmp.mkdir()
+        self._clips: list[tuple[str, int, int]] = []  # file name, first frame, last frame
+        self._writer: CacheWriter | None = None
+        self._done = False
+
+    # -- frames -------------------------------------------------------------------------------
+
+    def _open(self, first: int) -> None:
+        last = min(first + self.clip_frames, self.end_frame)  # shares `last` with the next clip
+        name = f"clip.{len(self._clips) + 1:04d}.usdc"
+        self._writer = CacheWriter(self._tmp / name, start_frame=first, end_frame=last, **self._args)
+        self._clips.append((name, first, last))
+
+    def write_frame(self, frame: int, *args, **kwargs) -> None:
+        if self._writer is None:
+            self._open(frame)
+        self._writer.write_frame(frame, *args, **kwargs)
+        if frame == self._clips[-1][2]:  # the clip is complete
+            self._writer.close()
+            self._writer = None
+            if frame < self.end_frame:  # the shared frame opens the next clip
+                self._open(frame)
+                self._writer.write_frame(frame, *args, **kwargs)
+
+    def add_layer_data(self, data: Mapping[str, Any]) -> None:
+        _merge(self._layer_data, dict(data))
+
+    # -- finishing ----------------------------------------------------------------------------
+
+    def close(self) -> Path:
+        if self._done:
+            return self.path
+        try:
+            if self._writer is not None or not self._clips or self._clips[-1][2] != self.end_frame:
+                raise RuntimeError(f"{self.path}: frames missing; nothing saved")
+            files = [str(self._tmp / name) for name, _, _ in self._clips]
+            topology = Sdf.Layer.CreateNew(str(self._tmp / "topology.usdc"))
+            UsdUtils.StitchClipsTopology(topology, files)
+            topology.Save()
+            manifest = Sdf.Layer.CreateNew(str(self._tmp / "manifest.usda"))
+            UsdUtils.StitchClipsManifest(manifest, topology, files, Sdf.Path("/World"))
+            manifest.Save()
+            result = self._result_layer()
+            # into place: the folder first (an older one is replaced), then the output
+            old = None
+            if self.folder.exists():
+                old = self.folder.with_name(f".{self.folder.name}.{os.getpid()}-{secrets.token_hex(4)}.old")
+                os.replace(self.folder, old)
+            os.replace(self._tmp, self.folder)
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+            from .files import write_atomically
+
+            write_atomically(self.path, lambda tmp: _export(result, tmp))
+        except BaseException:
+            self.abort()
+            raise
+        self._done = True
+        return self.path
+
+    def _result_layer(self) -> Sdf.Layer:
+        """The output: metadata, the topology sublayered, clips metadata on /World."""
+        folder = f"./{self.folder.name}"
+        first = Sdf.Layer.FindOrOpen(str(self._tmp / self._clips[0][0]))
+        layer = Sdf.Layer.CreateAnonymous(".usda")
+        root = layer.pseudoRoot
+        for key in ("upAxis", "metersPerUnit", "kilogramsPerUnit"):
+            root.SetInfo(key, first.pseudoRoot.GetInfo(key))
+        layer.timeCodesPerSecond = layer.framesPerSecond = self._fps
+        layer.startTimeCode, layer.endTimeCode = float(self.start_frame), float(self.end_frame)
+        layer.defaultPrim = "World"
+        data = _to_usd(self._provenance, "customLayerData")
+        _merge(data, _to_usd(self._layer_data, "customLayerData"))
+        layer.customLayerData = data
+        layer.subLayerPaths.append(f"{folder}/topology.usdc")
+        # stage time is clip time everywhere: one identity mapping, no jumps (a jump would add
+        # a sample just before each clip's start)
+        times = [(float(self.start_frame), float(self.start_frame)), (float(self.end_frame), float(self.end_frame))]
+        world = Sdf.CreatePrimInLayer(layer, "/World")  # an over; authored without a stage,
+        world.SetInfo("clips", {"default": {  # so nothing resolves before the files exist
+            "assetPaths": Sdf.AssetPathArray([f"{folder}/{name}" for name, _, _ in self._clips]),
+            "primPath": "/World",
+            "active": Vt.Vec2dArray([(float(a), float(k)) for k, (_, a, _) in enumerate(self._clips)]),
+            "times": Vt.Vec2dArray(times),
+            "manifestAssetPath": Sdf.AssetPath(f"{folder}/manifest.usda"),
+        }})
+        return layer
+
+    def abort(self) -> None:
+        if self._done:
+            return
+        if self._writer is not None:
+            self._writer.abort()
+            self._writer = None
+        shutil.rmtree(self._tmp, ignore_errors=True)
+
+
+def _export(layer: Sdf.Layer, path: str) -> None:
+    fmt = "usda" if path.endswith(".usda") else "usdc"
+    if not layer.Export(path, args={"format": fmt}):
+        raise OSError(f"{path}: writing the clips layer failed")

@@ -1,0 +1,891 @@
+"""USD shots as scenes: read a stage's UsdPhysics description into the validated Scene.
+
+A USD stage is a scene, as a TOML file is (DESIGN.md, "USD shots in, cache layers out").
+OpenUSD's own parser, ``UsdPhysics.UsdPhysicsLoadStageFromPrimRange``, finds the physics
+scene, the rigid bodies, their colliders and materials; simbake's own applied schema
+``SimbakeClothAPI`` (``schemas/``, registered by :mod:`simbake.usd_schema`) marks cloth
+meshes. Everything is converted here to the TOML path's units and axes (SI, Y up), so that
+nothing after loading knows where a scene came from; what the cache layer needs to go back
+(prim paths, parents' transforms, units) travels beside it as :class:`ShotInfo`.
+
+Frames. A body's frame is its prim's world transform at the start time code without its
+scale (its rotation and translation); its collider geometry (primitive or mesh, scale
+included) is expressed in that frame. Stage coordinates ``x_s`` become simbake's
+``x = metersPerUnit * C x_s``, where ``C`` is the identity for a Y-up stage and the rotation
+of -90 degrees about X for a Z-up one (stage +Z becomes +Y, stage +Y becomes -Z). A body
+frame's rotation ``R_s`` becomes ``C R_s C^T`` and body-frame coordinates ``b`` become
+``metersPerUnit * C b``, so the same shot authored Z up gives the very same bodies (and the
+same samples, in the same order) as authored Y up.
+
+Matrices here are numpy and act on column vectors (USD's ``Gf.Matrix4d`` acts on rows:
+``np.array(m).T`` converts).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SceneError
+from .scene import (Body, Cloth, Ground, Key, Scene, Shape, DEFAULT_DENSITY, CLOTH_MODELS,
+                    COMPRESSION_MODES, CLOTH_INTEGRATORS, RESERVED_NAMES)
+from . import usd_schema
+
+__all__ = ["ShotInfo", "ShotBody", "ShotCloth", "load_shot", "USD_SCENE_SUFFIXES"]
+
+USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
+CLOTH_API = "SimbakeClothAPI"
+_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # stage Z-up -> Y-up
+_SQRT_HALF = math.sqrt(0.5)
+_TOL = 1e-6  # relative tolerance on orthogonality and uniform scale of transforms
+
+
+# --------------------------------------------------------------------------------------------
+# What the cache layer needs to write back into the shot
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ShotBody:
+    """A dynamic body of the shot: where its simulated pose goes back."""
+
+    index: int                 # into Scene.bodies
+    prim_path: str
+    parent_rotation: tuple     # quaternion (w, x, y, z) of the parent's world rotation (stage axes)
+    parent_translation: tuple  # parent's world translation (stage units)
+    parent_scale: float        # the parent's uniform world scale
+    scale: tuple | None        # the prim's own local scale, None when (1, 1, 1)
+    op_types: dict = field(default_factory=dict)  # xformOp name -> the input's value type name
+    # under another dynamic body (whose pose the cache changes): world-space ops after
+    # !resetXformStack! (the parent_* fields are then the identity)
+    reset_xform_stack: bool = False
+    # an animated parent: its (rotation (w, x, y, z), translation, uniform scale) at every
+    # time code from the start, in place of the parent_* fields
+    parent_track: tuple = ()
+
+
+@dataclass(frozen=True)
+class ShotCloth:
+    """A cloth mesh of the shot: world (stage) to the prim's local space."""
+
+    index: int                    # into Scene.cloths
+    prim_path: str
+    world_to_local: tuple         # 4x4 (column vectors), stage units
+    normals_interpolation: bool = True  # author the 'normals' interpolation as "vertex"
+
+
+@dataclass(frozen=True)
+class ShotInfo:
+    """The input shot, for writing a cache layer that composes over it."""
+
+    path: Path                    # the root layer (absolute)
+    layers: tuple[str, ...]       # real paths of every layer the stage used (never overwritten)
+    up_axis: str                  # "Y" | "Z"
+    meters_per_unit: float
+    kilograms_per_unit: float
+    time_codes_per_second: float
+    frames_per_second: float | None
+    start_time_code: float
+    end_time_code: float
+    default_prim: str
+    bodies: tuple[ShotBody, ...]
+    cloths: tuple[ShotCloth, ...]
+
+    @property
+    def axes(self) -> np.ndarray:
+        """C: stage axes -> simbake's (Y up)."""
+        return _Z_UP if self.up_axis == "Z" else np.eye(3)
+
+    @property
+    def axes_quaternion(self) -> tuple[float, float, float, float]:
+        return (_SQRT_HALF, -_SQRT_HALF, 0.0, 0.0) if self.up_axis == "Z" else (1.0, 0.0, 0.0, 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Small math (column vectors; quaternions (w, x, y, z))
+# --------------------------------------------------------------------------------------------
+
+def _matrix(gf_matrix) -> np.ndarray:
+    return np.array(gf_matrix, dtype=np.float64).T
+
+
+def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
+    """The unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method), w >= 0."""
+    t = np.trace(r)
+    if t > 0:
+        s = math.sqrt(t + 1.0) * 2
+        q = (0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s)
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+        q = ((r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s)
+    elif r[1, 1] > r[2, 2]:
+        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+        q = ((r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s)
+    else:
+        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+        q = ((r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s)
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    if q[0] < 0:
+        q = -q
+    return tuple(float(c) for c in q)  # type: ignore[return-value]
+
+
+def _quat_matrix(q) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _rotation_and_scale(m3: np.ndarray):
+    """m3 = R diag(k) with R a proper rotation, or None (shear, a mirror, a zero scale)."""
+    k = np.linalg.norm(m3, axis=0)
+    if not np.all(k > 0):
+        return None
+    r = m3 / k
+    if np.abs(r.T @ r - np.eye(3)).max() > _TOL or np.linalg.det(r) <= 0:
+        return None
+    return r, k
+
+
+def _vec(value) -> tuple[float, float, float]:
+    return tuple(float(c) for c in value)  # type: ignore[return-value]
+
+
+def _decimal(value) -> float:
+    """A float32 attribute's value as the decimal its author wrote (0.6f -> 0.6, not
+    0.6000000238): the shortest decimal that rounds to the same float32. Doubles pass."""
+    value = float(value)
+    single = np.float32(value)
+    return float(str(single)) if float(single) == value and math.isfinite(value) else value
+
+
+def _decimals(values) -> tuple[float, ...]:
+    return tuple(_decimal(v) for v in values)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------
+
+def load_shot(path: str | os.PathLike[str]) -> Scene:
+    """Read a USD stage as a Scene; raise :class:`SceneError` (one line) on any problem."""
+    usd_schema.register()  # before the first stage, so SimbakeClothAPI is a known schema
+    from pxr import Tf, Usd
+
+    file = os.fspath(path)
+    given = Path(file).absolute()
+    stage_path = given.parent.resolve() / given.name
+    if not stage_path.is_file():
+        raise SceneError(file, "", "file not found" if not stage_path.exists() else "not a file")
+    try:
+        stage = Usd.Stage.Open(str(stage_path), Usd.Stage.LoadAll)
+    except Tf.ErrorException as error:
+        first = str(error).strip().splitlines()
+        detail = next((line.strip() for line in first if line.strip()), "unreadable")
+        raise SceneError(file, "", f"cannot open USD stage: {_short(detail, 160)}") from None
+    if stage is None:
+        raise SceneError(file, "", "cannot open USD stage")
+    return _Reader(file, stage_path, stage).scene()
+
+
+def _short(text: str, limit: int) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class _Reader:
+    """One stage read into a Scene; errors name the file, the prim path and the attribute."""
+
+    def __init__(self, file: str, path: Path, stage):
+        from pxr import UsdGeom, UsdPhysics
+
+        self.file, self.path, self.stage = file, path, stage
+        self.warnings: list[str] = []
+        self._warned: set[str] = set()
+        axis = UsdGeom.GetStageUpAxis(stage)
+        if axis not in ("Y", "Z"):
+            raise self.error("", "upAxis", f"must be Y or Z, got {axis!r}")
+        self.up_axis = axis
+        self.mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+        self.kpu = float(UsdPhysics.GetStageKilogramsPerUnit(stage))
+        for name, value in (("metersPerUnit", self.mpu), ("kilogramsPerUnit", self.kpu)):
+            if not (math.isfinite(value) and value > 0):
+                raise self.error("", name, f"must be a finite number > 0, got {value}")
+        self.C = _Z_UP if axis == "Z" else np.eye(3)
+        self.qC = (_SQRT_HALF, -_SQRT_HALF, 0.0, 0.0) if axis == "Z" else (1.0, 0.0, 0.0, 0.0)
+        if not stage.HasAuthoredTimeCodeRange():
+            raise self.error("", "startTimeCode", "the stage needs startTimeCode and endTimeCode "
+                                                  "(one frame per integer time code)")
+        self.start, self.end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+        for name, value in (("startTimeCode", self.start), ("endTimeCode", self.end)):
+            if not (math.isfinite(value) and value == int(value)):
+                raise self.error("", name, f"must be an integer time code, got {value}")
+        if self.end < self.start:
+            raise self.error("", "endTimeCode", f"must be >= startTimeCode ({self.start:g}), got {self.end:g}")
+        self.tcps = float(stage.GetTimeCodesPerSecond())
+        if not (math.isfinite(self.tcps) and self.tcps > 0):
+            raise self.error("", "timeCodesPerSecond", f"must be > 0, got {self.tcps}")
+        self.xforms = UsdGeom.XformCache(Usd_time(self.start))
+
+    # -- messages ---------------------------------------------------------------------------
+
+    def error(self, prim_path, attribute: str, problem: str) -> SceneError:
+        where = f"{prim_path}.{attribute}" if prim_path and attribute else str(prim_path or attribute)
+        return SceneError(self.file, where, problem)
+
+    def warn(self, prim_path, problem: str) -> None:
+        """Once per prim path and kind of problem."""
+        key = f"{prim_path}: {problem}"
+        if key not in self._warned:
+            self._warned.add(key)
+            self.warnings.append(f"{self.file}: {prim_path}: {problem}")
+
+    # -- conversions --------------------------------------------------------------------------
+
+    def point(self, p) -> tuple[float, float, float]:
+        return _vec(self.mpu * (self.C @ np.asarray(p, dtype=np.float64)))
+
+    def direction(self, v, scale: float) -> tuple[float, float, float]:
+        return _vec(scale * (self.C @ np.asarray(v, dtype=np.float64)))
+
+    def world(self, prim, time=None) -> np.ndarray:
+        from pxr import UsdGeom
+
+        if time is None:
+            return _matrix(self.xforms.GetLocalToWorldTransform(prim))
+        return _matrix(UsdGeom.XformCache(time).GetLocalToWorldTransform(prim))
+
+    def frame(self, prim, what: str, time=None):
+        """(R, t, k): the prim's world rotation, translation and scale along its own axes."""
+        m = self.world(prim, time)
+        parts = _rotation_and_scale(m[:3, :3])
+        if parts is None:
+            raise self.error(prim.GetPath(), "xformOpOrder",
+                             f"the {what}'s world transform has a shear, a mirror or a zero scale; "
+                             "simbake needs a rotation and a scale along the prim's own axes")
+        return parts[0], m[:3, 3], parts[1]
+
+    def pose(self, r: np.ndarray, t: np.ndarray):
+        """A stage rigid frame -> simbake's (position (m), orientation (w, x, y, z)): the
+        rotation C R C^T, so that body-frame coordinates turn with the axes too (b -> C b) and
+        the same shot authored Y up or Z up gives the very same bodies."""
+        return self.point(t), _quat_from_matrix(self.C @ r @ self.C.T)
+
+    def body_points(self, v: np.ndarray) -> np.ndarray:
+        """Body-frame points of the stage (rows, stage units) -> simbake's (m): mpu C b."""
+        return (np.asarray(v, dtype=np.float64) @ self.C.T) * self.mpu
+
+    # -- the scene ----------------------------------------------------------------------------
+
+    def scene(self) -> Scene:
+        from pxr import Sdf, UsdPhysics, Work
+
+        # The parser runs on one thread: deterministic order of reports, and it is known
+        # to race with many mesh colliders under one body on several threads.
+        limit = Work.GetConcurrencyLimit()
+        Work.SetConcurrencyLimit(1)
+        try:
+            parsed = UsdPhysics.UsdPhysicsLoadStageFromPrimRange(self.stage, [Sdf.Path.absoluteRootPath])
+        finally:
+            Work.SetConcurrencyLimit(limit)
+        descs = {kind: list(zip(*value)) for kind, value in parsed.items()}
+        T = UsdPhysics.ObjectType
+
+        self.materials = {str(p): d for p, d in descs.get(T.RigidBodyMaterial, [])}
+        shapes = {}
+        for kind in (T.CubeShape, T.SphereShape, T.CapsuleShape, T.CylinderShape, T.MeshShape,
+                     T.PlaneShape, T.Capsule1Shape, T.Cylinder1Shape):
+            for p, d in descs.get(kind, []):
+                shapes[str(p)] = d
+        for kind, entries in descs.items():
+            if kind not in _SUPPORTED:
+                for p, _ in entries:
+                    self.warn(p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
+        for p, d in shapes.items():
+            if d.collisionGroups:
+                self.warn(p, "collision groups are not simulated by simbake; the collider collides with everything")
+            if d.filteredCollisions:
+                self.warn(p, "filtered collision pairs are not simulated by simbake; left out")
+
+        gravity = self._gravity(descs.get(T.Scene, []))
+        self.dynamic_paths = {str(p) for p, d in descs.get(T.RigidBody, [])
+                              if d.rigidBodyEnabled and not d.kinematicBody}
+        used_names: set[str] = set()
+        bodies: list[Body] = []
+        shot_bodies: list[ShotBody] = []
+        for p, d in sorted(descs.get(T.RigidBody, []), key=lambda e: str(e[0])):
+            if not d.rigidBodyEnabled:
+                self.warn(p, "physics:rigidBodyEnabled is false; left out")
+                continue
+            body, target = self._rigid_body(str(p), d, shapes, used_names, len(bodies))
+            bodies.append(body)
+            if target is not None:
+                shot_bodies.append(target)
+
+        ground = None
+        for p, d in sorted(shapes.items()):
+            if str(d.rigidBody):
+                continue
+            if not d.collisionEnabled:
+                self.warn(p, "physics:collisionEnabled is false; left out")
+                continue
+            if d.type == T.PlaneShape:
+                if ground is not None:
+                    raise self.error(p, "", "a second static Plane: simbake has one ground plane")
+                ground = self._ground(p, d)
+            else:
+                bodies.append(self._static_body(p, d, used_names))
+
+        cloths, shot_cloths = self._cloths(used_names)
+        fps_meta = self.stage.GetFramesPerSecond() if self.stage.GetRootLayer().HasFramesPerSecond() else None
+        info = ShotInfo(
+            path=self.path,
+            layers=tuple(sorted({os.path.realpath(l.realPath) for l in self.stage.GetUsedLayers()
+                                 if l.realPath})),
+            up_axis=self.up_axis, meters_per_unit=self.mpu, kilograms_per_unit=self.kpu,
+            time_codes_per_second=self.tcps, frames_per_second=fps_meta,
+            start_time_code=self.start, end_time_code=self.end,
+            default_prim=self.stage.GetRootLayer().defaultPrim,
+            bodies=tuple(shot_bodies), cloths=tuple(shot_cloths))
+        return Scene(path=self.path, source=self.file, fps=self.tcps, start_frame=int(self.start),
+                     end_frame=int(self.end), gravity=gravity, ground=ground, bodies=tuple(bodies),
+                     cloths=tuple(cloths), warnings=tuple(self.warnings), shot=info)
+
+    def _gravity(self, scenes) -> tuple[float, float, float]:
+        if not scenes:
+            return (0.0, -9.81, 0.0)  # UsdPhysics: 9.81 m/s^2 down the up axis
+        if len(scenes) > 1:
+            self.warn(scenes[1][0], "a second PhysicsScene; simbake uses the first one's gravity")
+        path, d = scenes[0]
+        from pxr import UsdPhysics
+
+        api = UsdPhysics.Scene(self.stage.GetPrimAtPath(path))
+        # unauthored: 9.81 m/s^2 down the up axis, exactly (the parser's is a float32)
+        direction = np.asarray(_decimals(d.gravityDirection), dtype=np.float64)
+        if not api.GetGravityDirectionAttr().HasAuthoredValue():
+            direction = self.C.T @ np.array([0.0, -1.0, 0.0])
+        magnitude = _decimal(d.gravityMagnitude)
+        if not api.GetGravityMagnitudeAttr().HasAuthoredValue() or magnitude == -math.inf:
+            magnitude = 9.81 / self.mpu
+        if not (np.isfinite(direction).all() and math.isfinite(magnitude)):
+            raise self.error(path, "physics:gravityMagnitude", "must be finite")
+        norm = np.linalg.norm(direction)
+        if norm == 0:
+            return (0.0, 0.0, 0.0) if magnitude == 0 else (0.0, -abs(magnitude) * self.mpu, 0.0)
+        return self.direction(direction / norm, magnitude * self.mpu)
+
+    # -- materials ----------------------------------------------------------------------------
+
+    def _material(self, shape_path, shape) -> tuple[float, float, float | None]:
+        """(friction, restitution, density in kg/m^3 or None) of a collider's physics material."""
+        for m in shape.materials:
+            d = self.materials.get(str(m))
+            if d is None:
+                continue
+            friction, restitution = _decimal(d.dynamicFriction), _decimal(d.restitution)
+            if not (math.isfinite(friction) and friction >= 0):
+                raise self.error(m, "physics:dynamicFriction", f"must be a finite number >= 0, got {friction}")
+            if not (math.isfinite(restitution) and 0 <= restitution <= 1):
+                raise self.error(m, "physics:restitution", f"must be in [0, 1], got {restitution}")
+            if _decimal(d.staticFriction) != friction:
+                self.warn(m, f"physics:staticFriction ({float(d.staticFriction):g}) differs from "
+                             f"physics:dynamicFriction ({friction:g}); simbake uses one Coulomb "
+                             "coefficient, the dynamic one")
+            density = _decimal(d.density) * self.kpu / self.mpu ** 3 if d.density > 0 else None
+            return friction, restitution, density
+        return Body.friction, Body.restitution, None
+
+    # -- shapes -------------------------------------------------------------------------------
+
+    def _collider_geometry(self, prim, to_body: np.ndarray):
+        """A collider's surface in a body frame (stage units): ('box', size) | ('sphere', r)
+        when that is exact, else ('mesh', vertices, triangles). `to_body` maps the collider's
+        local space into the body frame (4x4)."""
+        from pxr import UsdGeom
+
+        path = prim.GetPath()
+        a, t = to_body[:3, :3], to_body[:3, 3]
+        parts = _rotation_and_scale(a)
+        centred = np.abs(t).max() <= _TOL * max(1.0, np.abs(a).max())
+        if prim.IsA(UsdGeom.Cube):
+            size = self._positive(prim, "size", UsdGeom.Cube(prim).GetSizeAttr().Get())
+            if centred and parts is not None and np.abs(parts[0] - np.eye(3)).max() <= _TOL:
+                return ("box", size * parts[1])
+            from . import _core
+
+            v, f = _core.box_mesh(np.full(3, size), 1)
+            return ("mesh", v @ a.T + t, np.asarray(f, dtype=np.int32))
+        if prim.IsA(UsdGeom.Sphere):
+            radius = self._positive(prim, "radius", UsdGeom.Sphere(prim).GetRadiusAttr().Get())
+            if centred and parts is not None and np.ptp(parts[1]) <= _TOL * parts[1].max():
+                return ("sphere", radius * float(parts[1].mean()))
+            from . import _core
+            from .assets import SPHERE_SUBDIVISIONS
+
+            v, f = _core.sphere_mesh(radius, SPHERE_SUBDIVISIONS)
+            return ("mesh", v @ a.T + t, np.asarray(f, dtype=np.int32))
+        if prim.IsA(UsdGeom.Capsule) or prim.IsA(UsdGeom.Cylinder):
+            import trimesh
+
+            schema = UsdGeom.Capsule(prim) if prim.IsA(UsdGeom.Capsule) else UsdGeom.Cylinder(prim)
+            radius = self._positive(prim, "radius", schema.GetRadiusAttr().Get())
+            height = self._positive(prim, "height", schema.GetHeightAttr().Get(), allow_zero=True)
+            axis = schema.GetAxisAttr().Get()
+            if prim.IsA(UsdGeom.Capsule):
+                mesh = trimesh.creation.capsule(height=height, radius=radius, count=[24, 24])
+            else:
+                mesh = trimesh.creation.cylinder(radius=radius, height=height, sections=32)
+            v = np.asarray(mesh.vertices, dtype=np.float64)  # along z, centred
+            v = {"X": v[:, [2, 0, 1]], "Y": v[:, [1, 2, 0]], "Z": v}[axis]
+            return ("mesh", v @ a.T + t, np.asarray(mesh.faces, dtype=np.int32))
+        if prim.IsA(UsdGeom.Mesh):
+            v, f = self._mesh_triangles(prim)
+            return ("mesh", v @ a.T + t, f)
+        raise self.error(path, "", f"a collider of type {prim.GetTypeName() or 'none'} is not supported "
+                                   "(Cube, Sphere, Capsule, Cylinder, Mesh, or a static Plane)")
+
+    def _positive(self, prim, attribute: str, value, allow_zero: bool = False) -> float:
+        value = float(value)
+        ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
+        if not ok:
+            bound = ">= 0" if allow_zero else "> 0"
+            raise self.error(prim.GetPath(), attribute, f"must be a finite number {bound}, got {value}")
+        return value
+
+    def _mesh_triangles(self, prim) -> tuple[np.ndarray, np.ndarray]:
+        """A Mesh's points (local, at the start) and its faces fanned into triangles."""
+        from pxr import UsdGeom
+
+        mesh = UsdGeom.Mesh(prim)
+        path = prim.GetPath()
+        points = mesh.GetPointsAttr().Get(self.start)
+        counts = mesh.GetFaceVertexCountsAttr().Get(self.start)
+        indices = mesh.GetFaceVertexIndicesAttr().Get(self.start)
+        if points is None or len(points) == 0:
+            raise self.error(path, "points", "the mesh has no points")
+        if counts is None or indices is None or len(counts) == 0:
+            raise self.error(path, "faceVertexCounts", "the mesh has no faces")
+        v = np.asarray(points, dtype=np.float64)
+        counts = np.asarray(counts, dtype=np.int64)
+        indices = np.asarray(indices, dtype=np.int64)
+        if not np.isfinite(v).all():
+            raise self.error(path, "points", "contains NaN or infinity")
+        if counts.min() < 3:
+            raise self.error(path, "faceVertexCounts", f"every face needs at least 3 vertices, got {int(counts.min())}")
+        if counts.sum() != len(indices):
+            raise self.error(path, "faceVertexIndices", f"has {len(indices)} entries but faceVertexCounts "
+                                                        f"sum to {int(counts.sum())}")
+        if indices.min() < 0 or indices.max() >= len(v):
+            raise self.error(path, "faceVertexIndices", f"an index is outside the {len(v)} points")
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        tris = []
+        for c in np.unique(counts):  # fan each face: (0, k, k + 1)
+            s = starts[counts == c]
+            for k in range(1, c - 1):
+                tris.append(np.stack([indices[s], indices[s + k], indices[s + k + 1]], axis=-1))
+        faces = np.concatenate(tris) if len(tris) == 1 else _face_order(tris, counts)
+        if UsdGeom.Mesh(prim).GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+            faces = faces[:, ::-1]
+        return v, np.ascontiguousarray(faces, dtype=np.int32)
+
+    # -- bodies -------------------------------------------------------------------------------
+
+    def _name(self, prim_path: str, used: set[str]) -> str:
+        from pxr import Sdf
+
+        path = Sdf.Path(prim_path)
+        name = path.name
+        if name in used or name in RESERVED_NAMES:
+            name = "_".join(str(path).strip("/").split("/"))
+        while name in used or name in RESERVED_NAMES:
+            name += "_"
+        used.add(name)
+        return name
+
+    def _shape(self, owner_path, colliders: list, body_r, body_t, what: str):
+        """The Shape (SI, body frame) of one or more collider prims of a body."""
+        pieces = []
+        for prim in colliders:
+            to_body = np.eye(4)
+            world = self.world(prim)
+            to_body[:3, :3] = body_r.T @ world[:3, :3]
+            to_body[:3, 3] = body_r.T @ (world[:3, 3] - body_t)
+            pieces.append((prim, self._collider_geometry(prim, to_body)))
+        if len(pieces) == 1 and pieces[0][1][0] == "box":
+            return Shape(kind="box", size=_vec(np.abs(self.C @ pieces[0][1][1]) * self.mpu))
+        if len(pieces) == 1 and pieces[0][1][0] == "sphere":
+            return Shape(kind="sphere", radius=float(pieces[0][1][1] * self.mpu))
+        from . import _core
+
+        vertices, triangles, offset = [], [], 0
+        for prim, geometry in pieces:
+            if geometry[0] == "box":
+                v, f = _core.box_mesh(np.asarray(geometry[1], dtype=np.float64), 1)
+            elif geometry[0] == "sphere":
+                v, f = _core.sphere_mesh(float(geometry[1]), 8)
+            else:
+                v, f = geometry[1], geometry[2]
+            vertices.append(self.body_points(v))
+            triangles.append(np.asarray(f, dtype=np.int32) + offset)
+            offset += len(v)
+        v, f = np.concatenate(vertices), np.concatenate(triangles)
+        self._check_closed(pieces, v, f)
+        return Shape(kind="mesh", mesh_vertices=_frozen(v), mesh_triangles=_frozen(f),
+                     mesh_source=str(owner_path))
+
+    def _check_closed(self, pieces, v, f) -> None:
+        import trimesh
+
+        mesh = trimesh.Trimesh(v, f, process=True)
+        if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0):
+            culprit = next((p for p, g in pieces if g[0] == "mesh"), pieces[0][0])
+            raise self.error(culprit.GetPath(), "faceVertexIndices",
+                             "a collider mesh must be closed and wound outwards (it has holes, open "
+                             "edges or inconsistent winding); its mass and level set need an inside")
+
+    def _rigid_body(self, path: str, d, shapes, used: set[str], index: int):
+        from pxr import Usd, UsdGeom, UsdPhysics
+
+        prim = self.stage.GetPrimAtPath(path)
+        r, t, k = self.frame(prim, "rigid body")
+        colliders = []
+        for c in d.collisions:
+            shape = shapes.get(str(c))
+            if shape is None:
+                self.warn(c, "a collider simbake cannot read (cone, points or custom shape); left out")
+                continue
+            if not shape.collisionEnabled:
+                self.warn(c, "physics:collisionEnabled is false; left out")
+                continue
+            if shape.type == UsdPhysics.ObjectType.PlaneShape:
+                raise self.error(c, "", "a Plane collider under a rigid body is not supported (planes are static ground)")
+            colliders.append((self.stage.GetPrimAtPath(c), shape))
+        if not colliders:
+            raise self.error(path, "", "a rigid body needs a collider (PhysicsCollisionAPI on a Cube, "
+                                       "Sphere, Capsule, Cylinder or Mesh at or under it)")
+        shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body")
+        friction, restitution, material_density = self._material(colliders[0][0].GetPath(), colliders[0][1])
+        for c, s in colliders[1:]:
+            if self._material(c.GetPath(), s)[:2] != (friction, restitution):
+                self.warn(path, "colliders with different physics materials; simbake uses the first one's")
+
+        mass, density, com, inertia = self._mass(prim, [c for c, _ in colliders], r, k, material_density)
+        position, orientation = self.pose(r, t)
+        kinematic = bool(d.kinematicBody)
+        for name, value in (("physics:velocity", d.linearVelocity), ("physics:angularVelocity", d.angularVelocity)):
+            if not np.isfinite(np.asarray(value, dtype=np.float64)).all():
+                raise self.error(path, name, "must be finite")
+        if d.startsAsleep:
+            self.warn(path, "physics:startsAsleep is not supported; the body starts awake "
+                            "(and sleeps after 0.5 s at rest)")
+        keys = self._keys(prim) if kinematic else ()
+        body = Body(
+            name=self._name(path, used), shape=shape, density=density, mass=mass,
+            position=position, orientation=orientation,
+            linear_velocity=self.direction(_decimals(d.linearVelocity), self.mpu),
+            angular_velocity=self.direction(_decimals(d.angularVelocity), math.pi / 180.0),
+            friction=friction, restitution=restitution, kinematic=kinematic,
+            keys=keys, center_of_mass=com, inertia=inertia, prim_path=path)
+        if kinematic:
+            return body, None  # the input's own animation already says where it is
+        return body, self._shot_body(prim, index, k)
+
+    def _shot_body(self, prim, index: int, world_scale: np.ndarray) -> ShotBody:
+        from pxr import UsdGeom
+
+        parent = prim.GetParent()
+        ancestors = []
+        p = parent
+        while p and not p.IsPseudoRoot():
+            ancestors.append(p)
+            p = p.GetParent()
+        reset = any(str(a.GetPath()) in self.dynamic_paths for a in ancestors)
+        animated = not reset and any(UsdGeom.Xformable(a) and UsdGeom.Xformable(a).TransformMightBeTimeVarying()
+                                     for a in ancestors)
+        m = self.world(parent) if ancestors and not reset else np.eye(4)
+        q, t, sigma = self._similarity(parent, m)
+        track = ()
+        if animated:
+            from pxr import Usd
+
+            track = tuple(self._similarity(parent, self.world(parent, Usd.TimeCode(code)))
+                          for code in range(int(self.start), int(self.end) + 1))
+        scale = world_scale / sigma
+        ops = {}
+        for op in UsdGeom.Xformable(prim).GetOrderedXformOps():
+            ops[op.GetOpName()] = str(op.GetAttr().GetTypeName())
+        for name in ("xformOp:translate", "xformOp:orient", "xformOp:scale"):
+            attr = prim.GetAttribute(name)
+            if attr and attr.GetTypeName():
+                ops[name] = str(attr.GetTypeName())
+        return ShotBody(index=index, prim_path=str(prim.GetPath()),
+                        parent_rotation=q, parent_translation=t, parent_scale=sigma,
+                        reset_xform_stack=reset, parent_track=track,
+                        scale=None if np.abs(scale - 1).max() <= _TOL else _vec(scale),
+                        op_types={n: ops[n] for n in ("xformOp:translate", "xformOp:orient", "xformOp:scale")
+                                  if n in ops})
+
+    def _similarity(self, parent, m: np.ndarray):
+        """(rotation quaternion, translation, uniform scale) of a parent's world transform."""
+        parts = _rotation_and_scale(m[:3, :3])
+        if parts is None or np.ptp(parts[1]) > _TOL * parts[1].max():
+            raise self.error(parent.GetPath(), "xformOpOrder",
+                             "the parent of a dynamic rigid body must have a rotation and a uniform "
+                             "scale (the cache overrides the body's own transform under it)")
+        return _quat_from_matrix(parts[0]), _vec(m[:3, 3]), float(parts[1].mean())
+
+    def _mass(self, prim, colliders, r, k, material_density):
+        """(mass kg | None, density kg/m^3 | None, centre of mass, inertia) from PhysicsMassAPI:
+        the body's mass, else its density, else a collider's density, else the material's,
+        else simbake's default density."""
+        from pxr import UsdPhysics
+
+        path = prim.GetPath()
+        com = inertia = None
+        mass = density = None
+        if prim.HasAPI(UsdPhysics.MassAPI):
+            api = UsdPhysics.MassAPI(prim)
+            m = _decimal(api.GetMassAttr().Get() or 0.0)
+            rho = _decimal(api.GetDensityAttr().Get() or 0.0)
+            if not math.isfinite(m) or m < 0:
+                raise self.error(path, "physics:mass", f"must be a finite number >= 0 (0: from density), got {m}")
+            if not math.isfinite(rho) or rho < 0:
+                raise self.error(path, "physics:density", f"must be a finite number >= 0 (0: default), got {rho}")
+            if m > 0:
+                mass = m * self.kpu
+            elif rho > 0:
+                density = rho * self.kpu / self.mpu ** 3
+            c = api.GetCenterOfMassAttr().Get()
+            if c is not None and np.isfinite(np.asarray(c, dtype=np.float64)).all() \
+                    and not np.all(np.asarray(c) == -np.inf):
+                # authored in the prim's local space (its scale included) -> body frame (m)
+                com = _vec(self.body_points(np.asarray(c, dtype=np.float64) * k))
+            diag = api.GetDiagonalInertiaAttr().Get()
+            if diag is not None and np.any(np.asarray(diag, dtype=np.float64) != 0):
+                diag = np.asarray(diag, dtype=np.float64)
+                if not (np.isfinite(diag).all() and (diag > 0).all()):
+                    raise self.error(path, "physics:diagonalInertia", f"must be three numbers > 0, got {tuple(diag)}")
+                axes = api.GetPrincipalAxesAttr().Get()
+                q = (1.0, 0.0, 0.0, 0.0)
+                if axes is not None and (axes.GetReal() != 0 or any(axes.GetImaginary())):
+                    q = (axes.GetReal(), *axes.GetImaginary())
+                    q = tuple(c / math.sqrt(sum(x * x for x in q)) for c in q)
+                rot = _quat_matrix(q)
+                tensor = self.C @ rot @ np.diag(diag * self.kpu * self.mpu ** 2) @ rot.T @ self.C.T
+                inertia = tuple(_vec(row) for row in tensor)
+                if mass is None:
+                    raise self.error(path, "physics:mass", "an authored diagonalInertia needs an authored mass")
+        if mass is None and density is None:
+            for c in colliders:
+                if c.HasAPI(UsdPhysics.MassAPI):
+                    rho = _decimal(UsdPhysics.MassAPI(c).GetDensityAttr().Get() or 0.0)
+                    if rho > 0:
+                        density = rho * self.kpu / self.mpu ** 3
+                        break
+        if mass is None and density is None:
+            density = material_density if material_density else DEFAULT_DENSITY
+        return mass, density, com, inertia
+
+    def _keys(self, prim) -> tuple[Key, ...]:
+        """A kinematic body's world pose at every time code when its transform is animated."""
+        from pxr import Usd, UsdGeom
+
+        animated = False
+        p = prim
+        while p and not p.IsPseudoRoot():
+            if UsdGeom.Xformable(p) and UsdGeom.Xformable(p).TransformMightBeTimeVarying():
+                animated = True
+                break
+            p = p.GetParent()
+        if not animated:
+            return ()
+        keys = []
+        for code in range(int(self.start), int(self.end) + 1):
+            r, t, _ = self.frame(prim, "kinematic body", Usd.TimeCode(code))
+            position, orientation = self.pose(r, t)
+            keys.append(Key(time=(code - self.start) / self.tcps, position=position, orientation=orientation))
+        return tuple(keys)
+
+    def _static_body(self, path, d, used: set[str]) -> Body:
+        prim = self.stage.GetPrimAtPath(path)
+        r, t, _ = self.frame(prim, "static collider")
+        shape = self._shape(path, [prim], r, t, "static collider")
+        friction, restitution, _ = self._material(path, d)
+        position, orientation = self.pose(r, t)
+        return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
+                    position=position, orientation=orientation, linear_velocity=(0.0, 0.0, 0.0),
+                    angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
+                    kinematic=True, prim_path=str(path))
+
+    def _ground(self, path, d) -> Ground:
+        prim = self.stage.GetPrimAtPath(path)
+        from pxr import UsdGeom
+
+        r, t, _ = self.frame(prim, "ground plane")
+        axis = {"X": 0, "Y": 1, "Z": 2}[UsdGeom.Plane(prim).GetAxisAttr().Get()]
+        normal = self.C @ r[:, axis]
+        if abs(abs(normal[1]) - 1.0) > 1e-6:
+            raise self.error(path, "axis", f"a static Plane is the ground and must face the stage's up "
+                                           f"axis ({self.up_axis}); this one faces {tuple(np.round(r[:, axis], 6))}")
+        friction, restitution, _ = self._material(path, d)
+        return Ground(height=self.point(t)[1], friction=friction, restitution=restitution)
+
+    # -- cloth --------------------------------------------------------------------------------
+
+    def _cloths(self, used: set[str]):
+        from pxr import Usd, UsdGeom, UsdPhysics
+
+        cloths, targets = [], []
+        for prim in self.stage.Traverse():
+            if not _has_cloth_api(prim):
+                continue
+            path = prim.GetPath()
+            if not prim.IsA(UsdGeom.Mesh):
+                raise self.error(path, "", f"{CLOTH_API} applies to a Mesh, not a {prim.GetTypeName() or 'typeless prim'}")
+            if prim.HasAPI(UsdPhysics.RigidBodyAPI) or prim.HasAPI(UsdPhysics.CollisionAPI):
+                raise self.error(path, "", f"a {CLOTH_API} mesh cannot also be a rigid body or collider")
+            local, faces = self._mesh_triangles(prim)
+            world = self.world(prim)
+            vertices = (local @ world[:3, :3].T + world[:3, 3]) @ self.C.T * self.mpu
+            a = _ClothAttributes(self, prim)
+            pinned = a.ints("pinned")
+            bad = [i for i in pinned if not 0 <= i < len(vertices)]
+            if bad:
+                raise self.error(path, "simbake:cloth:pinned", f"point {bad[0]} does not exist (the mesh has {len(vertices)})")
+            cloth = Cloth(
+                name=self._name(str(path), used), grid_size=None, grid_resolution=None, mesh_path=None,
+                position=(0.0, 0.0, 0.0), orientation=(1.0, 0.0, 0.0, 0.0),
+                area_density=a.number("areaDensity", Cloth.area_density, self.kpu / self.mpu ** 2, positive=True),
+                stretch_stiffness=a.number("stretchStiffness", Cloth.stretch_stiffness, self.kpu),
+                bend_stiffness=a.number("bendStiffness", Cloth.bend_stiffness, self.kpu * self.mpu ** 2),
+                damping=a.number("damping", Cloth.damping, 1.0),
+                strain_limit=a.number("strainLimit", Cloth.strain_limit, 1.0),
+                compression=a.token("compression", Cloth.compression, COMPRESSION_MODES),
+                friction=a.number("friction", Cloth.friction, 1.0),
+                thickness=a.number("thickness", Cloth.thickness, self.mpu),
+                pinned=tuple(pinned),
+                model=a.token("model", Cloth.model, CLOTH_MODELS),
+                poisson_ratio=a.number("poissonRatio", Cloth.poisson_ratio, 1.0, below=0.5),
+                integrator=a.token("integrator", Cloth.integrator, CLOTH_INTEGRATORS),
+                self_collision=a.boolean("selfCollision", Cloth.self_collision),
+                mesh_vertices=_frozen(vertices), mesh_triangles=_frozen(faces), prim_path=str(path))
+            if UsdGeom.Xformable(prim).TransformMightBeTimeVarying():
+                self.warn(path, "the cloth's transform is animated; its rest shape and cache use the start time code's")
+            targets.append(ShotCloth(index=len(cloths), prim_path=str(path),
+                                     world_to_local=tuple(_vec(row) for row in np.linalg.inv(world))))
+            cloths.append(cloth)
+        return cloths, targets
+
+
+class _ClothAttributes:
+    """Typed reads of simbake:cloth:* on one prim; unauthored attributes give the SI default."""
+
+    def __init__(self, reader: _Reader, prim):
+        self.reader, self.prim = reader, prim
+
+    def _get(self, name: str):
+        attr = self.prim.GetAttribute(f"simbake:cloth:{name}")
+        if not attr or not attr.HasAuthoredValue():
+            return None
+        return attr.Get(self.reader.start)
+
+    def _error(self, name: str, problem: str) -> SceneError:
+        return self.reader.error(self.prim.GetPath(), f"simbake:cloth:{name}", problem)
+
+    def number(self, name: str, default: float, unit: float, positive: bool = False,
+               below: float | None = None) -> float:
+        value = self._get(name)
+        if value is None:
+            return default
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self._error(name, f"must be a number, got {value!r}")
+        value = _decimal(value)
+        ok = math.isfinite(value) and (value > 0 if positive else value >= 0)
+        if below is not None:
+            ok = ok and value < below
+        if not ok:
+            bound = f"in [0, {below})" if below is not None else ("> 0" if positive else ">= 0")
+            raise self._error(name, f"must be a finite number {bound}, got {value}")
+        return value * unit
+
+    def token(self, name: str, default: str, choices: tuple[str, ...]) -> str:
+        value = self._get(name)
+        if value is None:
+            return default
+        if str(value) not in choices:
+            raise self._error(name, f"unknown value {str(value)!r} (expected one of: {', '.join(choices)})")
+        return str(value)
+
+    def boolean(self, name: str, default: bool) -> bool:
+        value = self._get(name)
+        return default if value is None else bool(value)
+
+    def ints(self, name: str) -> list[int]:
+        value = self._get(name)
+        return [] if value is None else [int(i) for i in value]
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------
+
+_SUPPORTED_NAMES = ("Scene", "RigidBody", "RigidBodyMaterial", "CubeShape", "SphereShape",
+                    "CapsuleShape", "CylinderShape", "MeshShape", "PlaneShape", "Capsule1Shape",
+                    "Cylinder1Shape")
+
+
+class _SupportedKinds:
+    def __contains__(self, kind) -> bool:
+        return str(kind).rsplit(".", 1)[-1] in _SUPPORTED_NAMES
+
+
+_SUPPORTED = _SupportedKinds()
+
+
+def _describe_kind(kind) -> str:
+    name = str(kind).rsplit(".", 1)[-1]
+    if name.endswith("Joint"):
+        return f"a joint ({name})"
+    return {"Articulation": "an articulation", "CollisionGroup": "a collision group",
+            "ConeShape": "a cone collider", "CustomShape": "a custom collider",
+            "SpherePointsShape": "a sphere-points collider"}.get(name, name)
+
+
+def _has_cloth_api(prim) -> bool:
+    """SimbakeClothAPI applied (also read when the schema was registered too late to be known)."""
+    if CLOTH_API in prim.GetAppliedSchemas():
+        return True
+    listop = prim.GetMetadata("apiSchemas")
+    return bool(listop) and CLOTH_API in listop.ApplyOperations([])
+
+
+def _face_order(tris: list[np.ndarray], counts: np.ndarray) -> np.ndarray:
+    """Fanned triangles in face order (so triangle order follows the mesh's faces)."""
+    order = []
+    starts = {}
+    for c in np.unique(counts):
+        starts[c] = np.flatnonzero(counts == c)
+    keys = []
+    for c in np.unique(counts):
+        for k in range(1, c - 1):
+            keys.append(starts[c] * 64 + k)
+    keys = np.concatenate(keys)
+    order = np.argsort(keys, kind="stable")
+    return np.concatenate(tris)[order]
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+def Usd_time(code: float):
+    from pxr import Usd
+
+    return Usd.TimeCode(code)
