@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pxr import Usd
+
 from simbake import _core
 from simbake.assets import CACHE_KEY, bake_level_set, write_level_set
 from simbake.errors import OutputError, SceneError
@@ -40,16 +42,31 @@ def snapshot(directory: Path) -> dict[str, bytes]:
 # inputs are never written
 # --------------------------------------------------------------------------------------------
 
+SHOT = Path(__file__).resolve().parents[2] / "assets" / "scenes" / "shot.usda"
+
+
 @pytest.mark.parametrize("name, args", [
-    ("scene.usda", ["-o", "scene.usda"]),           # a TOML scene with a USD suffix, -o itself
-    ("shot.usdc", []),                              # the default output is SCENE.usdc here
+    ("scene.usda", ["-o", "scene.usda"]),           # a USD shot baked onto itself
+    ("shot.usdc", ["-o", "./shot.usdc"]),           # the same file by another spelling
     ("take.qa.json", ["-o", "take.usdc"]),           # the QA sidecar would be the scene
 ])
 def test_bake_never_writes_over_its_scene(tmp_path, name, args):
-    (tmp_path / name).write_text(textwrap.dedent(DROP_SCENE))
+    if name.endswith((".usda", ".usdc")):
+        Usd.Stage.Open(str(SHOT)).Export(str(tmp_path / name))
+    else:
+        (tmp_path / name).write_text(textwrap.dedent(DROP_SCENE))
     before = snapshot(tmp_path)
     line = assert_one_line_error(simbake("bake", name, *args, cwd=tmp_path))
     assert "would write over the input" in line and name in line
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("name", ["scene.usda", "shot.usdc"])
+def test_a_toml_scene_with_a_usd_suffix_is_refused_whole(tmp_path, name):
+    (tmp_path / name).write_text(textwrap.dedent(DROP_SCENE))
+    before = snapshot(tmp_path)
+    line = assert_one_line_error(simbake("bake", name, cwd=tmp_path))
+    assert name in line
     assert snapshot(tmp_path) == before
 
 
