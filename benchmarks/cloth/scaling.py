@@ -44,7 +44,7 @@ def measure(args) -> None:
     out = RESULTS / f"cloth_scaling_{args.name}.json"
     saved = json.loads(out.read_text()) if out.exists() else {}
     for n in args.resolutions:
-        for pc in PRECONDITIONERS:
+        for pc in args.preconditioners:
             key = f"{n} {pc}"
             extra = ["--seconds", str(args.seconds), "--preconditioner", pc, "--self-collision", args.self_collision]
             runs = []
@@ -124,6 +124,7 @@ def main() -> None:
     parser.add_argument("--resolutions", type=int, nargs="+", default=list(compare.spec.RESOLUTIONS))
     parser.add_argument("--seconds", type=float, default=0.5, help="simulated seconds per run")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--preconditioners", nargs="+", choices=PRECONDITIONERS, default=list(PRECONDITIONERS))
     parser.add_argument("--self-collision", choices=("on", "off"), default="off")
     parser.add_argument("--name", default="drape", help="results file cloth_scaling_<name>.json")
     parser.add_argument("--timeout", type=float, default=3600.0)

@@ -92,7 +92,7 @@
 // a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
 // is a smoothed-aggregation multigrid V-cycle, whose iteration count stays nearly flat as
 // the mesh is refined, for all but tiny cloths, which keep block-Jacobi (its iterations
-// grow as 1/h, but below 300 vertices they are few and cheaper than V-cycles).
+// grow as 1/h, but below 200 vertices they are few and cheap).
 // (A sparse Cholesky factorization each step, SimplicialLDLT, was 10x slower on the 64 x 64
 // drape; see benchmarks/cloth.)
 // For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
@@ -199,9 +199,11 @@ constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
-// Automatic preconditioner: multigrid from this many free vertices, block-Jacobi below
-// (where block-Jacobi's few iterations cost less than the V-cycles; benchmarks/cloth/scaling.py)
-constexpr int kMultigridMinimumVertices = 300;
+// Automatic preconditioner: multigrid from this many free vertices, block-Jacobi below. On the
+// 17 x 17 drape (289 vertices) the two cost the same and multigrid's solve is the more
+// accurate (benchmarks/results/cloth_scaling.md); from 33 x 33 up multigrid is faster.
+// Tiny cloths (strips, patches) keep block-Jacobi, whose few iterations are cheapest there.
+constexpr int kMultigridMinimumVertices = 200;
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);

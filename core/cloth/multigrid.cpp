@@ -46,7 +46,9 @@
 //    exactly), the residual restricted by P^T, the coarse correction, then a backward sweep:
 //        x = S_fwd(b);  x += P V_(l+1)(P^T (b - A x));  x = S_bwd(b, x).
 //    The backward sweep is the forward one's adjoint, so the cycle is a symmetric positive
-//    definite operator: a valid CG preconditioner. Everything runs in a fixed order on one
+//    definite operator: a valid CG preconditioner. The sweeps read the off-diagonal blocks
+//    in single precision (the products are summed in double): the cycle is bound by memory
+//    traffic, and its rounding (1e-7 relative) is far below what a preconditioner may err. Everything runs in a fixed order on one
 //    thread, so the result has the same bits at any thread count.
 #include "cloth/multigrid.h"
 
@@ -338,7 +340,12 @@ void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
     const Recipe& left = left_[l];
     for (size_t k = 0; k < left.from.size(); ++k) coarse.block[left.to[k]] += left.weight[k] * b.block[left.from[k]];
   }
-  for (size_t l = 0; l + 1 < matrix_.size(); ++l) invert_diagonal(matrix_[l], inverse_diagonal_[l]);
+  for (size_t l = 0; l + 1 < matrix_.size(); ++l) {
+    invert_diagonal(matrix_[l], inverse_diagonal_[l]);
+    BlockMatrix& m = matrix_[l];
+    m.block_f.resize(m.block.size());
+    for (size_t k = 0; k < m.block.size(); ++k) m.block_f[k] = m.block[k].cast<float>();
+  }
   // the coarsest level, dense
   const BlockMatrix& last = matrix_.back();
   Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(3 * last.size, 3 * last.size);
@@ -368,7 +375,7 @@ void Multigrid::cycle(int level) const {
   // forward Gauss-Seidel from zero: only the blocks before i are set yet
   for (int i = 0; i < a.size; ++i) {
     Vec3 s = at(b, i);
-    for (int k = a.start[i]; k < a.diagonal[i]; ++k) s.noalias() -= a.block[k] * at(x, a.column[k]);
+    for (int k = a.start[i]; k < a.diagonal[i]; ++k) s.noalias() -= a.block_f[k].cast<double>() * at(x, a.column[k]);
     at(x, i) = inverse[i] * s;
   }
   // the residual b - A x: row i's sweep left b_i - sum_(j <= i) A_ij x_j = 0, so only the
@@ -376,7 +383,7 @@ void Multigrid::cycle(int level) const {
   Eigen::VectorXd& res = residual_[level];
   for (int i = 0; i < a.size; ++i) {
     Vec3 s = Vec3::Zero();
-    for (int k = a.diagonal[i] + 1; k < a.start[i + 1]; ++k) s.noalias() -= a.block[k] * at(x, a.column[k]);
+    for (int k = a.diagonal[i] + 1; k < a.start[i + 1]; ++k) s.noalias() -= a.block_f[k].cast<double>() * at(x, a.column[k]);
     at(res, i) = s;
   }
   // restrict it: b_c = P^T (b - A x)
@@ -398,7 +405,7 @@ void Multigrid::cycle(int level) const {
   for (int i = a.size - 1; i >= 0; --i) {
     Vec3 s = at(b, i);
     for (int k = a.start[i]; k < a.start[i + 1]; ++k) {
-      if (k != a.diagonal[i]) s.noalias() -= a.block[k] * at(x, a.column[k]);
+      if (k != a.diagonal[i]) s.noalias() -= a.block_f[k].cast<double>() * at(x, a.column[k]);
     }
     at(x, i) = inverse[i] * s;
   }
