@@ -211,8 +211,8 @@ void require(bool ok, const std::string& message) {
 
 Vec3 row(const Points& x, int k) { return x.row(k).transpose(); }
 
-// CPU time of the calling thread (s): what the solver statistics count, unlike wall time
-// unmoved by other processes on a shared machine
+// CPU time of the calling thread (s), which the solver statistics count: unlike wall time,
+// it is not inflated by other processes on a shared machine
 double thread_cpu_seconds() {
   timespec t;
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
