@@ -235,7 +235,7 @@ PYBIND11_MODULE(_core, m) {
                            const std::string& model, double stretch_stiffness, double poisson_ratio,
                            double bend_stiffness, double damping, double strain_limit, const std::string& compression,
                            const std::vector<int>& pinned, const std::string& integrator, double friction,
-                           double thickness, double tolerance, bool self_collision) {
+                           double thickness, double tolerance, bool self_collision, const std::string& preconditioner) {
              ClothDesc d;
              d.rest = rest;
              d.triangles = triangles;
@@ -252,6 +252,9 @@ PYBIND11_MODULE(_core, m) {
              d.pinned = pinned;
              d.integrator = choose<ClothIntegrator>(integrator, {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}});
              d.tolerance = tolerance;
+             d.preconditioner = choose<ClothPreconditioner>(preconditioner, {{"automatic", ClothPreconditioner::kAutomatic},
+                                                                             {"block_jacobi", ClothPreconditioner::kBlockJacobi},
+                                                                             {"multigrid", ClothPreconditioner::kMultigrid}});
              return w.add_cloth(d, friction, thickness, self_collision);
            },
            py::arg("rest"), py::arg("triangles"), py::arg("area_density") = 0.1, py::arg("model") = "springs",
@@ -259,7 +262,7 @@ PYBIND11_MODULE(_core, m) {
            py::arg("damping") = 0.01, py::arg("strain_limit") = 0.1, py::arg("compression") = "subgrid",
            py::arg("pinned") = std::vector<int>(), py::arg("integrator") = "implicit", py::arg("friction") = 0.3,
            py::arg("thickness") = 0.005, py::arg("tolerance") = ClothDesc().tolerance,
-           py::arg("self_collision") = true)
+           py::arg("self_collision") = true, py::arg("preconditioner") = "automatic")
       .def_property_readonly("cloth_count", &World::cloth_count)
       .def("cloth_state", [](const World& w, long long i) {
              const Cloth& c = w.cloth(checked_index(i, w.cloth_count(), "cloth"));
@@ -341,6 +344,7 @@ PYBIND11_MODULE(_core, m) {
              d["cloth_penetration"] = s.cloth_penetration;
              d["max_cloth_strain"] = s.max_cloth_strain;
              d["cloth_solver_iterations"] = s.cloth_solver_iterations;
+             d["cloth_solver_seconds"] = s.cloth_solver_seconds;
              d["self_repulsions"] = s.self_collision.repulsions;
              d["self_collision_impulses"] = s.self_collision.collisions;
              d["impact_zone_rounds"] = s.self_collision.zone_rounds;

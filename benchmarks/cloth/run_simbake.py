@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/cloth/run_simbake.py N [--cloth-step S] [--tolerance T]
         [--integrator implicit|explicit] [--model springs|membrane] [--seconds T]
+        [--preconditioner automatic|block_jacobi|multigrid] [--self-collision on|off]
 
 N is the vertex count a side (17, 33, 65, 129, 257). The world is built with the core API
 exactly as `simbake bake assets/scenes/drape.toml` builds it (a kinematic analytic sphere,
@@ -12,7 +13,9 @@ Settings: the drape scene's material (stretch_stiffness 2000 N/m springs, bend_s
 friction 0.4 against the sphere's and the ground's 0.5: sqrt(0.4 x 0.5) = 0.447);
 --cloth-step is the world's cloth_max_substep (the longest implicit step; the explicit
 integrator takes its speed-of-sound step whatever it is), --tolerance the conjugate-gradient
-solve's relative residual. Only World.step_frame is timed; CPU time is reported beside wall
+solve's relative residual, --preconditioner its preconditioner (automatic: multigrid
+from 200 free vertices, block-Jacobi below), --self-collision off the cloth's self-collision
+(on, the default, as the scene's). Only World.step_frame is timed; CPU time is reported beside wall
 time (cpu_seconds), as the peers' runners do.
 """
 
@@ -31,7 +34,8 @@ import drape_spec as spec  # noqa: E402
 from simbake import _core  # noqa: E402
 
 
-def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: str) -> "_core.World":
+def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: str,
+          preconditioner: str = "automatic", self_collision: bool = True) -> "_core.World":
     world = _core.World(gravity=np.array([0.0, -spec.GRAVITY, 0.0]), threads=1, cloth_max_substep=cloth_step)
     world.set_ground(spec.GROUND, 0.5, 0.0)
     radius = spec.SPHERE_RADIUS
@@ -42,7 +46,8 @@ def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: s
     world.add_cloth(vertices, triangles, area_density=spec.AREA_DENSITY, model=model,
                     stretch_stiffness=spec.STRETCH, bend_stiffness=spec.BEND, damping=0.01,
                     strain_limit=0.1, integrator=integrator, friction=spec.FRICTION,
-                    thickness=spec.THICKNESS, tolerance=tolerance)
+                    thickness=spec.THICKNESS, tolerance=tolerance, preconditioner=preconditioner,
+                    self_collision=self_collision)
     return world
 
 
@@ -54,9 +59,12 @@ def main() -> None:
     parser.add_argument("--integrator", choices=("implicit", "explicit"), default="implicit")
     parser.add_argument("--model", choices=("springs", "membrane"), default="springs")
     parser.add_argument("--seconds", type=float, default=spec.SECONDS)
+    parser.add_argument("--preconditioner", choices=("automatic", "block_jacobi", "multigrid"), default="automatic")
+    parser.add_argument("--self-collision", choices=("on", "off"), default="on")
     args = parser.parse_args()
     spec.SECONDS = args.seconds
-    world = build(args.n, args.cloth_step, args.tolerance, args.integrator, args.model)
+    world = build(args.n, args.cloth_step, args.tolerance, args.integrator, args.model, args.preconditioner,
+                  args.self_collision == "on")
     meter = spec.Meter(args.n)
     meter.frame(0.0, world.cloth_state(0)[0])
     frames = int(round(args.seconds * spec.FPS))
@@ -70,9 +78,14 @@ def main() -> None:
     stats = world.statistics()
     settings = {"cloth_max_substep": args.cloth_step, "tolerance": args.tolerance,
                 "integrator": args.integrator, "model": args.model, "threads": 1}
+    if args.preconditioner != "automatic":
+        settings["preconditioner"] = args.preconditioner
+    if args.self_collision == "off":
+        settings["self_collision"] = False
     spec.report("simbake", args.n, settings, wall, meter, cpu_seconds=cpu,
                 cloth_steps=stats["cloth_steps"], substeps=stats["substeps"],
-                solver_iterations=stats["cloth_solver_iterations"])
+                solver_iterations=stats["cloth_solver_iterations"], solver_cpu_seconds=stats["cloth_solver_seconds"],
+                profile=world.profile())
 
 
 if __name__ == "__main__":

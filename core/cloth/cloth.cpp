@@ -88,8 +88,11 @@
 // only), so M + dt^2 H + damping dt H_m is symmetric positive definite. It is assembled
 // straight into an Eigen sparse matrix of fixed pattern (MatrixPattern, built once) over the
 // unpinned vertices only (pinned rows and columns removed: their velocity is zero and stays
-// so), scaled by M^-1/2 on both sides, and solved by block-Jacobi-preconditioned conjugate
-// gradients to a relative residual `tolerance`, started from zero.
+// so), scaled by M^-1/2 on both sides, and solved by preconditioned conjugate gradients to
+// a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
+// is a smoothed-aggregation multigrid V-cycle, whose iteration count stays nearly flat as
+// the mesh is refined, for all but tiny cloths, which keep block-Jacobi (its iterations
+// grow as 1/h, but below 200 vertices they are few and cheap).
 // (A sparse Cholesky factorization each step, SimplicialLDLT, was 10x slower on the 64 x 64
 // drape; see benchmarks/cloth.)
 // For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
@@ -125,9 +128,9 @@
 // inextensible cloth", with an active set for the inequality). Both stop when every edge is
 // within 1e-6 L of its bound. Impulses are internal, so momentum is kept.
 #include "cloth/cloth.h"
-#include <Eigen/IterativeLinearSolvers>
 
 #include "cloth/cloth_forces.h"
+#include "cloth/multigrid.h"
 #include "geometry/mesh.h"
 
 #include <Eigen/IterativeLinearSolvers>
@@ -139,52 +142,47 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+
+#include <time.h>
 
 namespace simbake {
 
-// Block-Jacobi preconditioner for conjugate gradients: the inverse of each vertex's 3x3
-// diagonal block (Eigen's preconditioner interface). A draped cloth's vertex is stiff along
-// its edges and soft across them, in directions the xyz diagonal alone does not see.
-class BlockJacobi {
+// Eigen's preconditioner concept over the cloth's Preconditioner (cloth/multigrid.h):
+// ConjugateGradient calls solve(r) once per iteration for z = P^-1 r. The preconditioner's
+// values are updated by the caller (Preconditioner::update) before the solve.
+class PreconditionerAdapter {
  public:
   using StorageIndex = int;
   enum { ColsAtCompileTime = Eigen::Dynamic, MaxColsAtCompileTime = Eigen::Dynamic };
-  BlockJacobi() = default;
+  void attach(const cloth_detail::Preconditioner* p, Eigen::Index size) { p_ = p; size_ = size; }
   template <class MatrixType>
-  explicit BlockJacobi(const MatrixType& m) { compute(m); }
+  PreconditionerAdapter& analyzePattern(const MatrixType&) { return *this; }
   template <class MatrixType>
-  BlockJacobi& analyzePattern(const MatrixType&) { return *this; }
+  PreconditionerAdapter& factorize(const MatrixType&) { return *this; }
   template <class MatrixType>
-  BlockJacobi& factorize(const MatrixType& m) { return compute(m); }
-  template <class MatrixType>
-  BlockJacobi& compute(const MatrixType& m) {
-    const Eigen::Index blocks = m.cols() / 3;
-    inverse_.resize(blocks);
-    for (Eigen::Index b = 0; b < blocks; ++b) {
-      Mat3 block = Mat3::Zero();
-      for (int c = 0; c < 3; ++c) {
-        for (typename MatrixType::InnerIterator it(m, 3 * b + c); it; ++it) {
-          if (it.row() >= 3 * b && it.row() < 3 * b + 3) block(it.row() - 3 * b, c) = it.value();
-        }
-      }
-      inverse_[b] = block.inverse();
-    }
-    return *this;
-  }
+  PreconditionerAdapter& compute(const MatrixType&) { return *this; }
   template <class Rhs, class Dest>
   void _solve_impl(const Rhs& b, Dest& x) const {
-    for (size_t k = 0; k < inverse_.size(); ++k) x.template segment<3>(3 * k) = inverse_[k] * b.template segment<3>(3 * k);
+    if constexpr (std::is_same_v<Rhs, Eigen::VectorXd> && std::is_same_v<Dest, Eigen::VectorXd>) {
+      p_->apply(b, x);
+    } else {
+      Eigen::VectorXd z;
+      p_->apply(Eigen::VectorXd(b), z);
+      x = z;
+    }
   }
   template <class Rhs>
-  inline const Eigen::Solve<BlockJacobi, Rhs> solve(const Eigen::MatrixBase<Rhs>& b) const {
-    return Eigen::Solve<BlockJacobi, Rhs>(*this, b.derived());
+  inline const Eigen::Solve<PreconditionerAdapter, Rhs> solve(const Eigen::MatrixBase<Rhs>& b) const {
+    return Eigen::Solve<PreconditionerAdapter, Rhs>(*this, b.derived());
   }
   Eigen::ComputationInfo info() { return Eigen::Success; }
-  Eigen::Index rows() const { return 3 * static_cast<Eigen::Index>(inverse_.size()); }
-  Eigen::Index cols() const { return rows(); }
+  Eigen::Index rows() const { return size_; }
+  Eigen::Index cols() const { return size_; }
 
  private:
-  std::vector<Mat3, Eigen::aligned_allocator<Mat3>> inverse_;
+  const cloth_detail::Preconditioner* p_ = nullptr;
+  Eigen::Index size_ = 0;
 };
 
 namespace {
@@ -201,12 +199,25 @@ constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
+// Automatic preconditioner: multigrid from this many free vertices, block-Jacobi below. On the
+// 17 x 17 drape (289 vertices) the two cost the same and multigrid's solve is the more
+// accurate (benchmarks/results/cloth_scaling.md); from 33 x 33 up multigrid is faster.
+// Tiny cloths (strips, patches) keep block-Jacobi, whose few iterations are cheapest there.
+constexpr int kMultigridMinimumVertices = 200;
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);
 }
 
 Vec3 row(const Points& x, int k) { return x.row(k).transpose(); }
+
+// CPU time of the calling thread (s), which the solver statistics count: unlike wall time,
+// it is not inflated by other processes on a shared machine
+double thread_cpu_seconds() {
+  timespec t;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
 
 // The length an edge of rest length `rest` must have when its candidate length is `length`:
 // (1 + limit) rest when stretched beyond that, rest under kEnforce when compressed beyond
@@ -291,6 +302,25 @@ Cloth::Cloth(const ClothDesc& desc)
   v_ = Points::Zero(n, 3);
   model_ = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
   pattern_ = std::make_shared<const cloth_detail::MatrixPattern>(*model_, free_index_);
+  // the implicit solve's preconditioner: multigrid over the free vertices' edge graph
+  const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid ||
+                         (desc.preconditioner == ClothPreconditioner::kAutomatic && free_count_ >= kMultigridMinimumVertices);
+  if (integrator_ == ClothIntegrator::kImplicit && free_count_ > 0 && multigrid) {
+    std::vector<std::vector<int>> graph(free_count_);
+    for (const cloth_detail::Edge& e : model_->edges()) {
+      const int a = free_index_[e.i], b = free_index_[e.j];
+      if (a < 0 || b < 0) continue;
+      graph[a].push_back(b);
+      graph[b].push_back(a);
+    }
+    Eigen::VectorXd scale(free_count_);
+    for (int v = 0; v < n; ++v) {
+      if (free_index_[v] >= 0) scale[free_index_[v]] = std::sqrt(mass_[v]);
+    }
+    preconditioner_ = std::make_shared<cloth_detail::Multigrid>(pattern_->make_matrix(), graph, scale);
+  } else {
+    preconditioner_ = std::make_shared<cloth_detail::BlockJacobi>();
+  }
 
   // the strain limiter's edge orders: as stored (sorted by vertex indices), and reversed
   forward_order_.resize(model_->edges().size());
@@ -365,16 +395,21 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
   for (int col = 0; col < system.outerSize(); ++col) {
     for (Eigen::SparseMatrix<double>::InnerIterator it(system, col); it; ++it) it.valueRef() *= scale[it.row()] * scale[col];
   }
-  // conjugate gradients (block-Jacobi preconditioned), started from zero: a truncated solve
+  // conjugate gradients (preconditioned: cloth/multigrid.h), started from zero: a truncated solve
   // then errs towards a smaller response, never adding energy. (Started from the last
   // step's solution it took 16% fewer iterations on the drape, but its error follows the
   // last step's: a spinning, strongly damped cloth gained 3% kinetic energy at 1e-3.)
-  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper, BlockJacobi> cg;
+  if (preconditioner_.use_count() > 1) preconditioner_ = preconditioner_->clone();
+  const double solve_start = thread_cpu_seconds();
+  preconditioner_->update(system);
+  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper, PreconditionerAdapter> cg;
   cg.setTolerance(tolerance_);
   cg.setMaxIterations(kMaxSolverIterations);
+  cg.preconditioner().attach(preconditioner_.get(), system.rows());
   cg.compute(system);
   const Eigen::VectorXd z = cg.solve(rhs);
   solver_iterations_ += cg.iterations();
+  solver_seconds_ += thread_cpu_seconds() - solve_start;
   Eigen::VectorXd dv = scale.asDiagonal() * z;
   // With no vertex pinned the exact dv changes the total momentum by exactly dt M g (the
   // internal forces sum to zero); the solver's residual need not, so its net part is removed
@@ -389,6 +424,10 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
     const int i = free_index_[k];
     if (i >= 0) v_.row(k) += dv.segment<3>(3 * i).transpose();
   }
+}
+
+bool Cloth::uses_multigrid() const {
+  return dynamic_cast<const cloth_detail::Multigrid*>(preconditioner_.get()) != nullptr;
 }
 
 // ---- stage: strain limiting (and enforced buckling) by impulses along edges

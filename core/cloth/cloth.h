@@ -24,11 +24,14 @@ namespace simbake {
 namespace cloth_detail {
 class ForceModel;     // cloth/cloth_forces.h: topology, rest state and element forces
 class MatrixPattern;  // cloth/cloth_forces.h: the implicit system's sparsity pattern
+class Preconditioner; // cloth/multigrid.h: z = P^-1 r for the implicit system's conjugate gradients
 }
 
 enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
 enum class ClothIntegrator { kExplicit, kImplicit };
+// the implicit solve's preconditioner: automatic = multigrid for all but tiny cloths
+enum class ClothPreconditioner { kAutomatic, kBlockJacobi, kMultigrid };
 
 struct ClothMaterial {
   InPlaneModel model = InPlaneModel::kSprings;
@@ -50,6 +53,7 @@ struct ClothDesc {
   std::vector<int> pinned;            // vertices held fixed
   ClothIntegrator integrator = ClothIntegrator::kImplicit;
   double tolerance = 1e-3;            // implicit: the linear solve's relative residual (mass norm)
+  ClothPreconditioner preconditioner = ClothPreconditioner::kAutomatic;  // implicit: of its conjugate gradients
 };
 
 class Cloth {
@@ -84,6 +88,8 @@ class Cloth {
   const ClothMaterial& material() const { return material_; }
   ClothIntegrator integrator() const { return integrator_; }
   long long solver_iterations() const { return solver_iterations_; }  // implicit solves' CG iterations so far
+  double solver_seconds() const { return solver_seconds_; }  // their CPU time (s): preconditioner update and CG
+  bool uses_multigrid() const;  // the implicit solve's preconditioner is multigrid (else block-Jacobi)
 
  private:
   // (the helper implementing this class adds the private members it needs:
@@ -92,6 +98,7 @@ class Cloth {
   ClothIntegrator integrator_;
   double tolerance_;
   long long solver_iterations_ = 0;
+  double solver_seconds_ = 0.0;
   Triangles triangles_;
   Eigen::VectorXd mass_;
   std::vector<char> pinned_;
@@ -103,6 +110,9 @@ class Cloth {
   std::shared_ptr<const cloth_detail::MatrixPattern> pattern_;
   Eigen::SparseMatrix<double> system_;  // the implicit step's matrix (pattern_'s), rebuilt each step
   std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
+  // z = P^-1 r for the implicit solve, built once; its values change every step, so a copy
+  // of a Cloth takes its own (clone) before its first solve
+  std::shared_ptr<cloth_detail::Preconditioner> preconditioner_;
   int free_count_ = 0;
   double stable_step_ = 0.0;     // stable_explicit_step(), computed once
   double max_correction_ = 0.0;  // the strain limiter's largest length correction per step (m)

@@ -296,8 +296,10 @@ void World::gather_statistics() {
   }
   double elastic = 0.0, strain = 0.0;
   long long iterations = 0;
+  double solver_seconds = 0.0;
   for (const Cloth& c : cloths_) {
     iterations += c.solver_iterations();
+    solver_seconds += c.solver_seconds();
     kinetic += c.kinetic_energy();
     potential += c.potential_energy(settings_.gravity);
     elastic += c.elastic_energy();
@@ -308,6 +310,7 @@ void World::gather_statistics() {
   stats_.elastic_energy = elastic;
   stats_.max_cloth_strain = strain;
   stats_.cloth_solver_iterations = iterations;
+  stats_.cloth_solver_seconds = solver_seconds;
   stats_.max_penetration = max_penetration();
   stats_.cloth_penetration = cloth_penetration();
 }

@@ -85,6 +85,7 @@ struct StepStatistics {
   long long substeps = 0;          // substeps taken since the world was built
   long long cloth_steps = 0;       // cloth steps taken since the world was built
   long long cloth_solver_iterations = 0;  // conjugate-gradient iterations of the cloths' implicit steps, in all
+  double cloth_solver_seconds = 0.0;      // their CPU time (preconditioner updates and CG), in all (s)
   double max_penetration = 0.0;    // deepest sample inside another body or the ground (m), last frame
   double kinetic_energy = 0.0;     // (J), now, bodies and cloths
   double elastic_energy = 0.0;     // cloths' stretch and bending energy (J), now

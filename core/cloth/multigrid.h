@@ -1,0 +1,110 @@
+// Preconditioners for the implicit cloth step's conjugate gradients: z = P^-1 r on the
+// step's 3x3-block system (M^-1/2 (M + dt^2 H + c dt H_m) M^-1/2 over the unpinned vertices,
+// the fixed pattern of MatrixPattern). Two behind one interface:
+//   BlockJacobi  the inverse of each vertex's 3x3 diagonal block; cheapest per iteration,
+//                but the iteration count grows with the resolution
+//   Multigrid    one V-cycle of smoothed-aggregation algebraic multigrid (multigrid.cpp, its
+//                method and formulas at the top); the iteration count stays nearly flat
+// A conjugate-gradient loop calls update() once per step (new values, same pattern), then
+// apply() once per iteration. Both are symmetric positive definite linear maps, so they are
+// valid CG preconditioners, also when a filter S (Baraff-Witkin's constraint projection) is
+// applied after them: S P^-1 S is symmetric positive semi-definite on the filtered space.
+// With a filter, pass update() the filtered matrix S A S + I - S (the same pattern, S being
+// block diagonal) rather than A: the V-cycle then approximates the constrained inverse
+// (7 iterations instead of 43 in ClothMultigrid.FilteredSolveMatchesDirectSolve).
+// Private to core/cloth.
+#pragma once
+
+#include "math/types.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include <memory>
+#include <vector>
+
+namespace simbake::cloth_detail {
+
+class Preconditioner {
+ public:
+  virtual ~Preconditioner() = default;
+  // new values of the system matrix (full symmetric storage, 3x3 blocks, the pattern the
+  // preconditioner was built for)
+  virtual void update(const Eigen::SparseMatrix<double>& a) = 0;
+  // z = P^-1 r (r and z of the matrix's size; z is overwritten)
+  virtual void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const = 0;
+  // a copy with its own scratch (Cloth copies share one until they solve)
+  virtual std::unique_ptr<Preconditioner> clone() const = 0;
+};
+
+// z_b = A_bb^-1 r_b per vertex block b
+class BlockJacobi final : public Preconditioner {
+ public:
+  void update(const Eigen::SparseMatrix<double>& a) override;
+  void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
+  std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<BlockJacobi>(*this); }
+
+ private:
+  std::vector<Mat3, Eigen::aligned_allocator<Mat3>> inverse_;  // (blocks) inverses of the diagonal blocks
+};
+
+// A symmetric 3x3-block sparse matrix, block rows in compressed form (full storage)
+struct BlockMatrix {
+  int size = 0;                                       // block rows (= block columns)
+  std::vector<int> start;                             // (size + 1) each row's first entry
+  std::vector<int> column;                            // (entries) block column, ascending per row
+  std::vector<int> diagonal;                          // (size) the entry of each row's diagonal block
+  std::vector<Mat3, Eigen::aligned_allocator<Mat3>> block;  // (entries) values
+  // (entries) the values in single precision, which the V-cycle reads: it is bound by
+  // memory traffic, and a preconditioner needs no more digits than its own error
+  std::vector<Eigen::Matrix3f, Eigen::aligned_allocator<Eigen::Matrix3f>> block_f;
+};
+
+// One level's prolongation: fine block i takes sum over its entries (coarse J, weight w) of
+// w x the coarse value of J, the same weight for x, y and z (so rigid translations pass
+// exactly between levels)
+struct Prolongation {
+  std::vector<int> start;        // (fine + 1)
+  std::vector<int> coarse;       // (entries)
+  std::vector<double> weight;    // (entries)
+};
+
+class Multigrid final : public Preconditioner {
+ public:
+  // The hierarchy from the system's pattern (full symmetric storage, dense 3x3 blocks) and
+  // the graph of its vertices' mesh edges (neighbours of each block, either direction;
+  // the aggregates follow it), and the value per block of the system's rigid translations
+  // (sqrt(m) for the mass-scaled system, whose unknown is M^1/2 dv). Built once per cloth;
+  // only values change afterwards.
+  Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vector<std::vector<int>>& edges,
+            const Eigen::VectorXd& scale);
+
+  void update(const Eigen::SparseMatrix<double>& a) override;
+  void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
+  std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<Multigrid>(*this); }
+
+  int levels() const { return static_cast<int>(matrix_.size()); }
+  int level_size(int l) const { return matrix_[l].size; }  // block rows of level l (0 finest)
+
+ private:
+  // A product's recipe: target[k] += weight[k] x source[from[k]] (3x3 blocks)
+  struct Recipe {
+    std::vector<int> from, to;
+    std::vector<double> weight;
+  };
+  std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
+  std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
+  std::vector<int> fine_slot_;                // (entries of level 0) position of each block's (0, 0) in the Eigen matrix
+  std::vector<int> fine_stride_;              // (entries of level 0) distance between its columns there
+  std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l
+  std::vector<Recipe> right_, left_;          // (levels - 1) A P from A, then P^T (A P)
+  std::vector<std::vector<Mat3, Eigen::aligned_allocator<Mat3>>> inverse_diagonal_;  // per level
+  Eigen::LLT<Eigen::MatrixXd> coarsest_;      // dense Cholesky of the coarsest level
+  // V-cycle scratch per level: right-hand side, solution, residual
+  mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;
+
+  void cycle(int level) const;
+};
+
+}  // namespace simbake::cloth_detail
