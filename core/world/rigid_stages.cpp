@@ -600,8 +600,10 @@ void World::propagate_shocks() {
   // push opposite ways (the level set's normal deep inside points to the nearest face, not
   // the separating one) the levels can throw it off at any speed. Shock propagation only
   // settles what the sweeps found, so a body of a contact group whose fastest point leaves
-  // it more than max_recovery_speed faster than it came in sends the whole group back to the
-  // sweeps' velocities (momentum exchanged in equal pairs, speeds the recovery caps)
+  // it more than twice max_recovery_speed faster than it came in sends the whole group back
+  // to the sweeps' velocities (momentum exchanged in equal pairs, speeds the recovery caps).
+  // Twice: a level may add the recovery of the level below to its own (the top of a tower
+  // settling at 1/60 s substeps gains 0.5 m/s and more, and must keep it to stand)
   std::vector<int> group(n);
   std::iota(group.begin(), group.end(), 0);
   auto root = [&](int i) {
@@ -613,7 +615,7 @@ void World::propagate_shocks() {
   }
   std::vector<char> thrown(n, 0);
   for (int i = 0; i < n; ++i) {
-    if (movable(i) && point_speed(i) > speed_before[i] + settings_.max_recovery_speed) {
+    if (movable(i) && point_speed(i) > speed_before[i] + 2.0 * settings_.max_recovery_speed) {
       thrown[root(i)] = 1;
     }
   }

@@ -190,7 +190,7 @@ def overlapped_boxes(layout: str, gravity: bool, count: int = 50, size: float = 
 def test_deep_overlaps_never_explode(layout, gravity):
     # before: 411 m/s, coordinates to 621 m. Penetration recovery asks each contact point for
     # at most max_recovery_speed (0.5 m/s) along its normal; a box pushed by many neighbours
-    # at once sums several such pushes (1.6 m/s at a corner, measured). The documented limit:
+    # at once sums several such pushes (1.65 m/s at a corner, measured). The documented limit:
     # no point of a body faster than 4 x max_recovery_speed (2 m/s) plus free fall, g t,
     # and no body further than that speed times the time from where it started
     w = overlapped_boxes(layout, gravity)
