@@ -36,11 +36,19 @@ Vec3 sliding_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitu
   return (-(1.0 + restitution) * n.dot(v) / denominator) * direction;
 }
 
+double impulse_energy_change(const Mat3& K, const Vec3& v, const Vec3& J) {
+  // dE = J.(v + v_after) / 2 with v_after = v + K J: the work of J on the average velocity
+  return J.dot(v + 0.5 * (K * J));
+}
+
 Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitution, double friction) {
-  if (friction <= 0.0) return frictionless_impulse(K, n, v, restitution);
-  const Vec3 J = static_impulse(K, n, v, restitution);
-  if (inside_friction_cone(J, n, friction)) return J;
-  return sliding_impulse(K, n, v, restitution, friction);
+  const Vec3 frictionless = frictionless_impulse(K, n, v, restitution);
+  if (friction <= 0.0) return frictionless;
+  Vec3 J = static_impulse(K, n, v, restitution);
+  if (!inside_friction_cone(J, n, friction)) J = sliding_impulse(K, n, v, restitution, friction);
+  // an impulse that would gain energy (see the header) gives way to the frictionless one,
+  // whose change is -(1 - e^2) (n.v)^2 / (2 n.K n) <= 0
+  return impulse_energy_change(K, v, J) > 0.0 ? frictionless : J;
 }
 
 Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const Vec3& total, double friction,

@@ -31,8 +31,17 @@ bool inside_friction_cone(const Vec3& J, const Vec3& n, double friction);
 // pull instead of push.
 Vec3 sliding_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitution, double friction);
 
+// Kinetic energy the pair gains from impulse J at a point with relative velocity v (J):
+// dE = J.v + J.K J / 2. Over all J it is smallest, -v.K^-1 v / 2, at J = -K^-1 v, so dE <= 0
+// exactly when |v_after|_K^-1 <= |v|_K^-1.
+double impulse_energy_change(const Mat3& K, const Vec3& v, const Vec3& J);
+
 // Coulomb friction as the notes prescribe: the static impulse if it lies in the friction
-// cone, else the sliding impulse on the cone. friction == 0 skips the friction math.
+// cone, else the sliding impulse on the cone. friction == 0 skips the friction math. No
+// impact may gain energy, but both can: the static impulse with e > 0 changes the energy by
+// (e^2 (n.v)^2 n.K^-1 n - v.K^-1 v) / 2, positive for some v when K is anisotropic (a hit
+// off the centre line), and the sliding impulse when the slip reverses (Kane's paradox).
+// Such an impulse is replaced by the frictionless one, which never gains (for e <= 1).
 Vec3 coulomb_impulse(const Mat3& K, const Vec3& n, const Vec3& v, double restitution, double friction);
 
 // One projected Gauss-Seidel update of a contact point's total impulse (the contact stage,

@@ -27,8 +27,15 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 namespace simbake {
+
+namespace {
+constexpr double kTrustedDepth = 0.25;  // of the thinner body's thickness: deeper, the level
+                                        // set's normal no longer points the way out
+constexpr double kImpactSpeed = 1.0;    // (m/s) slower approaches are settling, not impacts
+}  // namespace
 
 // ---------------------------------------------------------------------------------------
 // Candidates and point velocities
@@ -81,26 +88,94 @@ Vec3 World::point_velocity(int i, const Vec3& x) const {
 // ---------------------------------------------------------------------------------------
 // Narrow phase: the samples of body a tested against b's level set at the candidates.
 // The normal is b's level-set gradient turned into world space with b's candidate rotation.
+//
+// Swept test. The automatic substeps keep each body's travel per substep to a fraction of
+// the thinnest body's thickness, but they are capped (max_substeps) and may be fixed by the
+// user; a fast body could then step over a thin wall, or land past its middle, where the
+// level set's normal points on through it. So a pair whose relative travel over the step is
+// more than 2 travel_fraction of the thinner one's thickness is tested at m evenly spaced
+// fractions of the step (poses interpolated between the start and the candidates), and the
+// first fraction with a sample inside is the one reported (only fractions where the two
+// bounding spheres meet are tested, so the cost does not grow with the speed). No sample
+// then moves more than that distance, relative to the other body, between two tests: it
+// cannot pass through, nor past the middle of, a body at least 4 travel_fraction x its
+// thickness thick.
+
+// Tests of the pair over this step: 1 for most pairs, m for a fast pair (see above); the
+// travel is the relative motion of the centres plus each body's turn times its radius
+long long World::sweep_tests(int a, int b) const {
+  if (b == kGround) return 1;  // a half-space has no far side
+  // the contact stage works at the candidates: the collision stage has turned back whatever
+  // approached fast, and a body sliding fast over another keeps its contacts where it ends
+  if (average_velocities_) return 1;
+  auto turn = [&](int i) {
+    return candidates_[i].q.angularDistance(states_[i].q) * defs_[i].bounding_radius;
+  };
+  const Vec3 relative = (candidates_[a].x - states_[a].x) - (candidates_[b].x - states_[b].x);
+  const double travel = relative.norm() + turn(a) + turn(b);
+  const double spacing = 2.0 * settings_.travel_fraction * std::min(defs_[a].thickness, defs_[b].thickness);
+  const double tests = std::ceil(travel / spacing);
+  // (a cap far beyond any speed a scene can mean, so that the count stays an integer)
+  return std::isfinite(tests) ? static_cast<long long>(std::clamp(tests, 1.0, 1e15)) : 1;
+}
+
+// Mesh pose of body i at fraction s of the step, between its start and its candidate
+Pose World::pose_at(int i, double s) const {
+  if (s >= 1.0) return candidate_poses_[i];
+  RigidBodyState between = candidates_[i];
+  between.x = states_[i].x + s * (candidates_[i].x - states_[i].x);
+  between.q = states_[i].q.slerp(s, candidates_[i].q);
+  return mesh_pose(defs_[i], between);
+}
 
 void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const {
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
-  const Pose& pose_a = candidate_poses_[a];
+  const long long tests = sweep_tests(a, b);
+  long long first = 1, last = tests;
+  if (tests > 1) {
+    // only while the bounding spheres meet: |d0 + s dd| <= R_a + R_b for the centres' offset
+    // d(s), a quadratic in s; so the tests cost the same at any speed
+    const Vec3 d0 = states_[a].x - states_[b].x;
+    const Vec3 dd = (candidates_[a].x - candidates_[b].x) - d0;
+    const double reach = defs_[a].bounding_radius + defs_[b].bounding_radius;
+    const double qa = dd.squaredNorm(), qb = d0.dot(dd), qc = d0.squaredNorm() - reach * reach;
+    const double discriminant = qb * qb - qa * qc;
+    if (discriminant < 0.0 || (qa == 0.0 && qc > 0.0)) return;  // they never meet
+    if (qa > 0.0) {  // (else only turning, the centres still: every fraction)
+      const double lo = (-qb - std::sqrt(discriminant)) / qa, hi = (-qb + std::sqrt(discriminant)) / qa;
+      if (hi < 0.0 || lo > 1.0) return;
+      first = std::max(1LL, static_cast<long long>(std::floor(std::max(lo, 0.0) * tests)));
+      last = std::min(tests, static_cast<long long>(std::ceil(std::min(hi, 1.0) * tests)));
+    }
+  }
+  for (long long k = first; k <= last; ++k) {
+    if (samples_inside(a, b, static_cast<double>(k) / tests, out)) return;
+  }
+}
+
+// Appends a's samples inside b at fraction s of the step; true when there were any
+bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out) const {
+  const std::size_t before = out.size();
+  const Pose pose_a = pose_at(a, s);
   const Points& samples = defs_[a].samples;
   // cull in a's mesh frame: only samples within b's bounding sphere (or below the ground
   // plane) can be inside b, and that test costs a fraction of the full one
   Vec3 centre_in_a = Vec3::Zero(), down_in_a = Vec3::Zero();
   double reach = 0.0, ground_offset = 0.0;
   Box3 local_bounds;
+  Pose pose_b;
   if (b == kGround) {
     down_in_a = pose_a.rotation.transpose() * Vec3::UnitY();  // world y of a mesh point m: m.down + t.y
     ground_offset = pose_a.translation.y() - ground_->height;
   } else {
-    centre_in_a = pose_a.apply_inverse(candidates_[b].x);
+    pose_b = pose_at(b, s);
+    const Vec3 centre_b = s >= 1.0 ? candidates_[b].x : states_[b].x + s * (candidates_[b].x - states_[b].x);
+    centre_in_a = pose_a.apply_inverse(centre_b);
     reach = defs_[b].bounding_radius * defs_[b].bounding_radius;
     local_bounds = defs_[b].shape->bounds();
   }
-  for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-    const Vec3 m = samples.row(s).transpose();
+  for (Eigen::Index k = 0; k < samples.rows(); ++k) {
+    const Vec3 m = samples.row(k).transpose();
     double phi;
     Vec3 n;
     if (b == kGround) {
@@ -109,7 +184,6 @@ void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const
       n = Vec3::UnitY();
     } else {
       if ((m - centre_in_a).squaredNorm() > reach) continue;
-      const Pose& pose_b = candidate_poses_[b];
       const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
       if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
       Vec3 n_local;
@@ -120,8 +194,9 @@ void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const
       if (phi >= -kTouching) continue;
       n = pose_b.rotation * n_local;
     }
-    out.push_back({a, b, pose_a.apply(m), n, phi, static_cast<int>(s)});
+    out.push_back({a, b, candidate_poses_[a].apply(m), n, phi, static_cast<int>(k), s});
   }
+  return out.size() > before;
 }
 
 // Body i's K at world point x, lever arm from its candidate centre of mass; zero for the
@@ -174,6 +249,36 @@ bool World::apply_collision_impulse(const Penetration& p, double restitution, do
   return true;
 }
 
+// The point an impact strikes: the deepest sample alone, or, when other samples of the same
+// body are as deep (within 0.1% of its depth) on the same face (normals within 8 degrees)
+// and approaching too, the centroid of them all. A sample's depth is its approach speed
+// times the time since it entered, so these entered within 0.1% of a substep of the
+// deepest: the step cannot tell which came first, and they are struck together. A face landing flat
+// (or an edge) is then hit at its middle, as a square hit must be, not at whichever corner
+// round-off made deepest, which would spin the body and let friction throw it sideways.
+World::Penetration World::struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const {
+  // an impact, not settling: slower than 1 m/s, or than gravity adds in two substeps, is a
+  // stack settling, the contact stage's to finish; it keeps its single points (with the
+  // centroid, the 15-row pyramid at 1/60 s substeps falls)
+  const double approach = -(point_velocity(deepest.a, deepest.x) - point_velocity(deepest.b, deepest.x)).dot(deepest.n);
+  if (approach <= std::max(kImpactSpeed, 2.0 * settings_.gravity.norm() * dt_)) return deepest;
+  const double depth_tolerance = 1e-3 * -deepest.phi;
+  Vec3 sum = Vec3::Zero();
+  int count = 0;
+  for (const Penetration& p : found) {
+    if (p.a != deepest.a || p.phi > deepest.phi + depth_tolerance || p.n.dot(deepest.n) < 0.99) continue;
+    if ((point_velocity(p.a, p.x) - point_velocity(p.b, p.x)).dot(p.n) >= -settings_.contact_tolerance) continue;
+    sum += p.x;
+    ++count;
+  }
+  if (count <= 1) return deepest;
+  Penetration centre = deepest;
+  centre.x = sum / count;
+  // the centroid must itself approach (a spinning body's may not): else the deepest alone
+  const Vec3 v = point_velocity(centre.a, centre.x) - point_velocity(centre.b, centre.x);
+  return v.dot(centre.n) < -settings_.contact_tolerance ? centre : deepest;
+}
+
 namespace {
 
 // Fisher-Yates with a fixed generator (splitmix64): the same order on every platform
@@ -219,7 +324,9 @@ void World::resolve_collisions(double dt) {
         if (approach >= -settings_.contact_tolerance) continue;
         if (deepest == nullptr || p.phi < deepest->phi) deepest = &p;
       }
-      if (deepest == nullptr || !apply_collision_impulse(*deepest, pair.restitution, pair.friction)) continue;
+      if (deepest == nullptr) continue;
+      const Penetration struck = struck_point(found, *deepest);
+      if (!apply_collision_impulse(struck, pair.restitution, pair.friction)) continue;
       any = true;
       changed[pair.a] = sweep;
       if (pair.b != kGround) changed[pair.b] = sweep;
@@ -355,15 +462,18 @@ void World::find_contacts() {
 }
 
 // Moves a contact's sample with its body's candidate and takes b's normal there
+// (at the fraction of the step where it was found: see the swept test)
 void World::refresh_contact(Penetration& p) const {
-  p.x = candidate_poses_[p.a].apply(defs_[p.a].samples.row(p.sample).transpose());
+  const Vec3 m = defs_[p.a].samples.row(p.sample).transpose();
+  p.x = candidate_poses_[p.a].apply(m);
   if (p.b == kGround) {
     p.phi = p.x.y() - ground_->height;
     p.n = Vec3::UnitY();
   } else {
-    const Pose& pose_b = candidate_poses_[p.b];
+    const Pose pose_b = pose_at(p.b, p.s);
+    const Vec3 x = p.s >= 1.0 ? p.x : pose_at(p.a, p.s).apply(m);
     Vec3 n_local;
-    p.phi = defs_[p.b].shape->phi_and_normal(pose_b.apply_inverse(p.x), n_local);
+    p.phi = defs_[p.b].shape->phi_and_normal(pose_b.apply_inverse(x), n_local);
     p.n = pose_b.rotation * n_local;
   }
 }
@@ -385,7 +495,11 @@ bool World::apply_contact_impulse(ContactPoint& contact) {
   const Mat3 K = (a_moves ? contact.k_a : Mat3::Zero()) + (b_moves ? contact.k_b : Mat3::Zero());
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
   // penetration recovery: deeper than the slop, ask for a small separating speed
-  const double excess = -p.phi - settings_.penetration_slop;
+  // deeper than a quarter of the thinner body, a level set's normal is its nearest face's,
+  // not the way out: pushing there only spins the bodies up step after step (deep initial
+  // overlaps), so such a point is held inelastically and not pushed
+  const bool trusted = p.b == kGround || -p.phi <= kTrustedDepth * std::min(defs_[p.a].thickness, defs_[p.b].thickness);
+  const double excess = trusted ? -p.phi - settings_.penetration_slop : 0.0;
   const double target = excess > 0.0 ? std::min(settings_.penetration_recovery * excess / dt_,
                                                 settings_.max_recovery_speed) : 0.0;
   const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction, target);
@@ -438,6 +552,18 @@ void World::assign_contact_levels() {
 
 void World::propagate_shocks() {
   if (contacts_.empty()) return;
+  // each body's velocities and fastest point speed |v| + |omega| r before the levels
+  const int n = body_count();
+  std::vector<Vec3> v_before(n), l_before(n);
+  std::vector<double> speed_before(n);
+  auto point_speed = [&](int i) {
+    return states_[i].v.norm() + (inverse_inertia_[i] * states_[i].l).norm() * defs_[i].bounding_radius;
+  };
+  for (int i = 0; i < n; ++i) {
+    v_before[i] = states_[i].v;
+    l_before[i] = states_[i].l;
+    speed_before[i] = point_speed(i);
+  }
   assign_contact_levels();
   // the ground and kinematic bodies sit below level 0; bodies connected to neither
   // (level -1) keep the result of the sweeps
@@ -470,6 +596,36 @@ void World::propagate_shocks() {
     if (frozen_[i]) ++version_[i];
   }
   std::fill(frozen_.begin(), frozen_.end(), 0);
+  // Frozen levels are infinite masses, and where deep overlaps give a body contacts that
+  // push opposite ways (the level set's normal deep inside points to the nearest face, not
+  // the separating one) the levels can throw it off at any speed. Shock propagation only
+  // settles what the sweeps found, so a body of a contact group whose fastest point leaves
+  // it more than twice max_recovery_speed faster than it came in sends the whole group back
+  // to the sweeps' velocities (momentum exchanged in equal pairs, speeds the recovery caps).
+  // Twice: a level may add the recovery of the level below to its own (the top of a tower
+  // settling at 1/60 s substeps gains 0.5 m/s and more, and must keep it to stand)
+  std::vector<int> group(n);
+  std::iota(group.begin(), group.end(), 0);
+  auto root = [&](int i) {
+    while (group[i] != i) i = group[i] = group[group[i]];
+    return i;
+  };
+  for (const ContactPoint& c : contacts_) {
+    if (c.point.b != kGround) group[root(c.point.a)] = root(c.point.b);
+  }
+  std::vector<char> thrown(n, 0);
+  for (int i = 0; i < n; ++i) {
+    if (movable(i) && point_speed(i) > speed_before[i] + 2.0 * settings_.max_recovery_speed) {
+      thrown[root(i)] = 1;
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!thrown[root(i)] || !movable(i)) continue;
+    states_[i].v = v_before[i];
+    states_[i].l = l_before[i];
+    stale_[i] = 1;
+    ++version_[i];
+  }
   refresh_stale_candidates();
 }
 

@@ -170,6 +170,9 @@ class World {
     Vec3 n;      // unit normal of b's level set at x, world, pointing towards a
     double phi;  // b's signed distance at x (m), negative
     int sample;  // index of the sample in a's samples
+    double s = 1.0;  // fraction of the step at which x, n and phi were taken (1: the candidates;
+                     // less for a fast pair, see sweep_tests); x is then where the sample is
+                     // at the candidates, so that lever arms are from the candidate centres
   };
   // A contact point of the contact stage, found when the stage begins
   struct ContactPoint {
@@ -223,10 +226,14 @@ class World {
   void refresh_stale_candidates();
   Vec3 point_velocity(int i, const Vec3& x) const;
   void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
+  long long sweep_tests(int a, int b) const;
+  Pose pose_at(int i, double s) const;
+  bool samples_inside(int a, int b, double s, std::vector<Penetration>& out) const;
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
+  Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
   void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
   void find_contacts();
   static void reduce_to_four(std::vector<Penetration>& points);
