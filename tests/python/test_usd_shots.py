@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+from dataclasses import replace
 import subprocess
 import sys
 from pathlib import Path
@@ -133,14 +134,23 @@ def test_the_composed_shot_matches_a_bake_of_its_toml(tmp_path):
     toml = tmp_path / "shot.toml"
     toml.write_text(shots.equivalent_toml(end=end))
     assert main(["bake", str(shot), "-o", str(tmp_path / "cache.usdc"), "--shot", str(tmp_path / "out.usda"), "-q"]) == 0
-    assert main(["bake", str(toml), "-o", str(tmp_path / "toml.usdc"), "-q"]) == 0
+    # The TOML bake starts from the very numbers the shot was read as (its quatf orients,
+    # vector3f velocities and point3f rest shape are float32 round-offs of the TOML's), so that
+    # what is compared is the cache layer and its composition, not how contacts amplify 1e-8.
+    read = {body.name: body for body in simbake.load_scene(shot).bodies}
+    typed = simbake.load_scene(toml)
+    same_start = tuple(replace(body, position=read[body.name].position, orientation=read[body.name].orientation,
+                               linear_velocity=read[body.name].linear_velocity,
+                               angular_velocity=read[body.name].angular_velocity, keys=read[body.name].keys)
+                       for body in typed.bodies)
+    simbake.bake(replace(typed, bodies=same_start), tmp_path / "toml.usdc", qa=False)
     composed, reference = Usd.Stage.Open(str(tmp_path / "out.usda")), Usd.Stage.Open(str(tmp_path / "toml.usdc"))
     for frame in (1, 6, 12, 18, 24):
         for name, path in (("Crate", "/World/Props/Crate"), ("Ball", "/World/Props/Ball"), ("Pusher", "/World/Pusher")):
             world = _world(composed, path, frame)
             ref = _world(reference, f"/World/{name}", frame)
-            # The inputs differ by float32 round-off (quatf orients, vector3f velocities, float
-            # masses read back as their decimals); over 24 frames of contact that stays < 1e-5 m.
+            # The same start: what is left is the layer's float/double round-off (1e-7 m)
+            # and the cloth's float32 rest shape, which touches nothing the bodies touch.
             np.testing.assert_allclose(world[:3, 3], ref[:3, 3], atol=1e-5, err_msg=f"{name} at {frame}")
             np.testing.assert_allclose(world[:3, :3], ref[:3, :3], atol=1e-4, err_msg=f"{name} at {frame}")
         sheet = composed.GetPrimAtPath("/World/Sheet")
