@@ -461,3 +461,73 @@ def test_shot_stage_shows_every_body_on_its_plane_ground(tmp_path):
                     assert ok, (frame, why)
         finally:
             preview.close()
+
+
+@pytest.mark.parametrize("kind", ["Cube", "Sphere", "Capsule", "Cylinder", "Cone", "Plane"])
+@pytest.mark.parametrize("axis", ["X", "Y", "Z"])
+def test_gprim_tessellation_fills_its_extent_facing_out(kind, axis):
+    # the tessellation spans the extent USD computes for the prim, and every triangle is
+    # wound counterclockwise seen from the side its normals face, which is outwards
+    from pxr import Usd, UsdGeom
+
+    from simbake.preview import tessellate
+
+    stage = Usd.Stage.CreateInMemory()
+    prim = stage.DefinePrim("/shape", kind)
+    for name, value in (("size", 0.7), ("radius", 0.3), ("height", 1.1), ("width", 3.0), ("length", 0.5)):
+        if prim.GetAttribute(name):
+            prim.GetAttribute(name).Set(value)
+    if prim.GetAttribute("axis"):
+        prim.GetAttribute("axis").Set(axis)
+    points, corners, normals = tessellate(prim)
+    extent = np.array(UsdGeom.Boundable(prim).ComputeExtent(Usd.TimeCode.Default()))
+    assert np.allclose(points.min(axis=0), extent[0], atol=1e-6), (points.min(axis=0), extent)
+    assert np.allclose(points.max(axis=0), extent[1], atol=1e-6), (points.max(axis=0), extent)
+    tri = points[corners].reshape(-1, 3, 3)
+    area = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    facing = normals.reshape(-1, 3, 3).mean(axis=1)
+    solid = np.linalg.norm(area, axis=1) > 1e-9
+    assert (np.einsum("ij,ij->i", area[solid], facing[solid]) > 0).all()
+    assert (np.einsum("ij,ij->i", tri.mean(axis=1)[solid], facing[solid]) >= -1e-9).all()
+
+
+def test_a_wall_plane_is_a_quad_and_a_ground_plane_the_ground(tmp_path):
+    # a 1.6 x 1.0 m Plane facing the camera (axis Z) is drawn where it is, as a finite quad;
+    # a 10 m Plane facing up at the recorded ground's height is the checkered ground (not a
+    # quad over it), and neither blows up the automatic camera's framing of the box beside them
+    from pxr import Gf, UsdGeom
+
+    from simbake.preview import Preview
+
+    path = tmp_path / "planes.usda"
+    stage = gprim_stage(path)
+    wall = UsdGeom.Plane.Define(stage, "/World/wall")
+    wall.CreateAxisAttr(UsdGeom.Tokens.z)
+    wall.CreateWidthAttr(1.6)
+    wall.CreateLengthAttr(1.0)
+    wall.AddTranslateOp().Set(Gf.Vec3d(1.0, 0.6, 0))
+    ground = UsdGeom.Plane.Define(stage, "/World/ground")
+    ground.CreateAxisAttr(UsdGeom.Tokens.y)
+    ground.CreateWidthAttr(10.0)
+    ground.CreateLengthAttr(10.0)
+    cube = UsdGeom.Cube.Define(stage, "/World/cube")
+    cube.CreateSizeAttr(1.0)
+    cube.AddTranslateOp().Set(Gf.Vec3d(-1.2, 0.5, 0))
+    stage.GetRootLayer().Save()
+    image = render(path)
+    col, row = project([1.0, 0.6, 0])
+    assert not is_grey(image[row, col]), image[row, col]
+    for point in ([1.0, 1.25, 0], [2.0, 0.6, 0]):  # beyond its edges: sky, ground
+        col, row = project(point)
+        assert is_grey(image[row, col]) or is_sky(image[row, col]), (point, image[row, col])
+    for point in ([0.0, 0.0, 2.0], [-1.2, 0.0, 1.5]):  # the checkered ground, grey
+        col, row = project(point)
+        assert is_grey(image[row, col]) and image[row, col].min() > 60, (point, image[row, col])
+    preview = Preview(path, (W, H))
+    try:
+        assert preview.geometry.ground_plane.GetPath() == "/World/ground"
+        assert [d.prim.GetName() for d in preview.geometry.drawables] == ["wall", "cube"]
+        lo, hi, _, _ = preview.frame_range([1])
+        assert np.allclose(lo, [-1.7, 0, -0.5]) and np.allclose(hi, [-0.7, 1, 0.5]), (lo, hi)
+    finally:
+        preview.close()
