@@ -1,16 +1,21 @@
 """`simbake preview`: a headless CPU render of a USD cache, as a contact sheet or a movie.
 
-What is drawn: every `Mesh` of the stage (a body's mesh under its Xform, a cloth) and every
-`PointInstancer`'s prototype meshes at each instance, with their authored normals (so a
-preview shades as a renderer would: smooth where the cache says smooth), under a key light
-and a fill from the camera, on a checkered ground plane. Double-sided meshes (the cloth)
-show their front in orange and their back in blue, so a layer passing through another, or a
-cloth seen from behind, shows at once. Guides (level sets) are not drawn.
+What is drawn: every `Mesh` of the stage (a body's mesh under its Xform, a cloth), every
+UsdGeom gprim a USD shot's bodies are (`Cube`, `Sphere`, `Capsule`, `Cylinder`, `Cone`,
+tessellated once per prim: hard edges for the cube, smooth elsewhere; a `Plane` as a finite
+quad) and every `PointInstancer`'s prototype meshes and gprims at each instance, with their
+full composed transforms at each time and a mesh's authored normals (so a preview shades as
+a renderer would: smooth where the cache says smooth), under a key light and a fill from the
+camera, on a checkered ground plane. Double-sided meshes and SimbakeClothAPI meshes (the
+cloth) show their front in orange and their back in blue, so a layer passing through
+another, or a cloth seen from behind, shows at once. Guides (level sets) are not drawn.
 
 Camera: `auto` frames the whole animation's extent (the union of the world bounds of every
-rendered frame) from the front, right and above; or the path of a `Camera` prim of the stage.
-The ground is the scene's ground (recorded in the cache's customLayerData), or a reference
-plane just under the animation's extent when the scene had none.
+rendered frame, Planes left out when anything else is drawn) from the front, right and
+above; or the path of a `Camera` prim of the stage. The ground is the scene's ground
+(recorded in a TOML scene's cache's customLayerData), or a shot's ground: the lowest still
+Plane facing up, drawn as the checkered ground at its height instead of as a quad; or a
+reference plane just under the animation's extent when there is none.
 
 Renderer: OpenGL 3.3 through moderngl on an EGL context on Mesa's llvmpipe (a CPU
 rasterizer: no GPU, no display), 4x multisampled, with a shadow map from the key light so
@@ -121,6 +126,8 @@ class _Drawable:
     instancer: object = None     # UsdGeom.PointInstancer drawing this prototype
     prototype: object = None     # the prototype root prim the mesh sits under
     proto_index: int = -1
+    points: np.ndarray | None = None   # a gprim's tessellation (prim space), fixed: (p, 3)
+    normals: np.ndarray | None = None  # and its normal at each triangle corner: (3t, 3)
 
 
 def _color(name: str) -> tuple[float, float, float]:
@@ -151,6 +158,135 @@ def _triangulate(counts: np.ndarray, indices: np.ndarray, left_handed: bool):
     face = np.concatenate(faces)
     return indices[slot], face, slot
 
+# gprims (Cube, Sphere, Capsule, Cylinder, Cone, Plane) are tessellated once, in prim space;
+# round ones as a profile (rows of radius, height along the axis, normal) turned about it
+SEGMENTS = 48                    # around the axis of a round gprim
+RINGS = 24                       # from pole to pole of a sphere (half each for a capsule's caps)
+_AXES = {"X": (1, 2, 0), "Y": (2, 0, 1), "Z": (0, 1, 2)}  # (u, v, axis): u x v = axis
+
+
+def _revolve(parts: Sequence[Sequence[tuple[float, float, float, float]]], axis: str):
+    """Points, triangle corners and corner normals of the surface swept by turning each part
+    of a profile (rows (radius, height, radial normal, axial normal), from the -axis end to the
+    +axis end) about `axis`; normals are smooth within a part and break between parts."""
+    u, v, a = _AXES.get(str(axis), _AXES["Z"])
+    theta = np.linspace(0.0, 2 * math.pi, SEGMENTS + 1)[:-1]
+    ring = np.zeros((SEGMENTS, 3))
+    ring[:, u], ring[:, v] = np.cos(theta), np.sin(theta)
+    up = np.zeros(3)
+    up[a] = 1.0
+    points, normals, corners = [], [], []
+    count = 0
+    for part in parts:
+        rows = np.asarray(part, dtype=np.float64)
+        for r, h, nr, na in rows:
+            points.append(r * ring + h * up)
+            normals.append(nr * ring + na * up)
+        j = np.arange(SEGMENTS)
+        k = (j + 1) % SEGMENTS
+        for row in range(len(rows) - 1):
+            lo, hi = count + row * SEGMENTS, count + (row + 1) * SEGMENTS
+            corners.append(np.stack([lo + j, lo + k, hi + k, lo + j, hi + k, hi + j], axis=1).reshape(-1))
+        count += len(rows) * SEGMENTS
+    points, normals = np.concatenate(points), np.concatenate(normals)
+    corners = np.concatenate(corners)
+    return points, corners, normals[corners]
+
+
+def _cap(radius: float, height: float, sign: float):
+    """A flat disc closing a cylinder or cone at `height`, facing `sign` along the axis."""
+    rows = [(0.0, height, 0.0, sign), (radius, height, 0.0, sign)]
+    return rows if sign < 0 else rows[::-1]
+
+
+def _box(half: np.ndarray):
+    """A box of half sizes `half`: 6 quads, hard edges (corner normals are the faces')."""
+    points, normals = [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            u, v = (axis + 1) % 3, (axis + 2) % 3
+            if sign < 0:
+                u, v = v, u  # counterclockwise seen from outside
+            quad = []
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = n.copy()
+                p[u], p[v] = a, b
+                quad.append(p * half)
+            points.extend(quad)
+            normals.extend([n] * 4)
+    base = np.arange(6)[:, None] * 4
+    corners = (base + np.array([0, 1, 2, 0, 2, 3])).reshape(-1)
+    return np.array(points), corners, np.array(normals)[corners]
+
+
+def _plane(width: float, length: float, axis: str):
+    """A Plane's finite quad: width along x (z when the axis is X), length along y (z when Y)."""
+    u, v, a = {"X": (2, 1, 0), "Y": (0, 2, 1), "Z": (0, 1, 2)}.get(str(axis), (0, 1, 2))
+    points = np.zeros((4, 3))
+    for k, (s, t) in enumerate(((-1, -1), (1, -1), (1, 1), (-1, 1))):
+        points[k, u], points[k, v] = s * width / 2, t * length / 2
+    n = np.zeros(3)
+    n[a] = 1.0
+    corners = np.array([0, 1, 2, 0, 2, 3])
+    if np.dot(np.cross(points[1] - points[0], points[2] - points[0]), n) < 0:
+        corners = corners[[0, 2, 1, 3, 5, 4]]
+    return points, corners, np.repeat(n[None], 6, axis=0)
+
+
+GPRIMS = ("Cube", "Sphere", "Capsule", "Cylinder", "Cone", "Plane")
+
+
+def tessellate(prim):
+    """(points, corners, corner normals) of a Cube, Sphere, Capsule, Cylinder, Cone or Plane,
+    from its attributes at the earliest time; None for other prims or a degenerate size."""
+    from pxr import Usd
+
+    kind = prim.GetTypeName()
+    if kind not in GPRIMS:
+        return None
+
+    def get(name, fallback):
+        attr = prim.GetAttribute(name)
+        value = attr.Get(Usd.TimeCode.EarliestTime()) if attr else None
+        return fallback if value is None else value
+
+    if kind == "Cube":
+        size = float(get("size", 2.0))
+        return _box(np.full(3, size / 2)) if size > 0 else None
+    axis = get("axis", "Z")
+    if kind == "Plane":
+        width, length = (float(get(n, 2.0)) for n in ("width", "length"))
+        width, length = (min(x, 1e4) for x in (width, length))  # an "infinite" plane: 10 km
+        return _plane(width, length, axis) if width > 0 and length > 0 else None
+    r = float(get("radius", 1.0))
+    if not r > 0:
+        return None
+    phi = np.linspace(0.0, math.pi, RINGS + 1)
+    if kind == "Sphere":
+        return _revolve([[(r * math.sin(p), -r * math.cos(p), math.sin(p), -math.cos(p)) for p in phi]], "Z")
+    h = float(get("height", 2.0 if kind != "Capsule" else 1.0))
+    if kind == "Capsule":  # height: the spine between the centres of the two half spheres
+        half = RINGS // 2
+        rows = [(r * math.sin(p), (-h / 2 if k <= half else h / 2) - r * math.cos(p), math.sin(p), -math.cos(p))
+                for k, p in enumerate(np.concatenate([phi[:half + 1], phi[half:]]))]
+        return _revolve([rows], axis)
+    if not h > 0:
+        return None
+    if kind == "Cylinder":
+        side = [(r, -h / 2, 1.0, 0.0), (r, h / 2, 1.0, 0.0)]
+        return _revolve([_cap(r, -h / 2, -1.0), side, _cap(r, h / 2, 1.0)], axis)
+    slant = math.hypot(h, r)  # Cone: the base at -height/2, the apex at +height/2
+    side = [(r, -h / 2, h / slant, r / slant), (0.0, h / 2, h / slant, r / slant)]
+    return _revolve([_cap(r, -h / 2, -1.0), side], axis)
+
+
+def _ancestors(prim):
+    while prim and not prim.IsPseudoRoot():
+        yield prim
+        prim = prim.GetParent()
+
 
 class CacheGeometry:
     """The drawable meshes of a USD stage and their world-space triangles at any time."""
@@ -165,6 +301,7 @@ class CacheGeometry:
         if up == UsdGeom.Tokens.z:
             self.to_display[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
         self.drawables: list[_Drawable] = []
+        self.planes: list[object] = []   # Plane prims: not framed by the automatic camera
         drawn = (UsdGeom.Tokens.default_, UsdGeom.Tokens.render)
         it = iter(Usd.PrimRange(stage.GetPseudoRoot()))
         for prim in it:
@@ -175,8 +312,49 @@ class CacheGeometry:
             if prim.IsA(UsdGeom.PointInstancer):
                 self._add_instancer(UsdGeom.PointInstancer(prim))
                 it.PruneChildren()  # prototypes are drawn through the instancer
-            elif prim.IsA(UsdGeom.Mesh):
-                self._add_mesh(prim)
+            else:
+                d = self._drawable(prim)
+                if d is not None:
+                    self.drawables.append(d)
+                    if prim.IsA(UsdGeom.Plane):
+                        self.planes.append(prim)
+        self.ground_plane = None         # the Plane drawn as the checkered ground, if any
+        self.ground_height = self._recorded_ground()
+        self._find_ground_plane()
+
+    def _recorded_ground(self) -> float | None:
+        """The ground height a TOML scene's cache records in its customLayerData."""
+        data = self.stage.GetRootLayer().customLayerData.get("simbake", {})
+        ground = data.get("ground") if hasattr(data, "get") else None
+        if not ground or "height" not in ground:
+            return None
+        return float(ground["height"])  # along the up axis, which is display space's y
+
+    def _find_ground_plane(self) -> None:
+        """A shot's ground: the lowest still Plane facing up (display y), drawn as the checkered
+        ground at its height instead of as a quad (at the recorded ground's height, when the
+        stage records one)."""
+        from pxr import UsdGeom
+
+        xforms = UsdGeom.XformCache(self.stage.GetStartTimeCode())
+        best = None
+        for prim in self.planes:
+            moving = any(UsdGeom.Xformable(p).TransformMightBeTimeVarying()
+                         for p in _ancestors(prim) if p.IsA(UsdGeom.Xformable))
+            d = next(d for d in self.drawables if d.prim == prim)
+            m = np.array(xforms.GetLocalToWorldTransform(prim)) @ self.to_display.T
+            normal = d.normals[0] @ np.linalg.inv(m[:3, :3]).T
+            normal /= max(np.linalg.norm(normal), 1e-12)
+            if moving or abs(normal[1]) < 0.999:
+                continue
+            height = float(m[3, 1])
+            if self.ground_height is not None and abs(height - self.ground_height) > 1e-3 * max(1.0, abs(height)):
+                continue
+            if best is None or height < best[0]:
+                best = (height, prim)
+        if best is not None:
+            self.ground_height, self.ground_plane = best
+            self.drawables = [d for d in self.drawables if d.prim != self.ground_plane]
 
     def _mesh_drawable(self, prim, **extra) -> _Drawable | None:
         from pxr import UsdGeom
@@ -188,15 +366,26 @@ class CacheGeometry:
             return None
         left = mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded
         corners, faces, slots = _triangulate(np.asarray(counts), np.asarray(indices), left)
-        double_sided = bool(mesh.GetDoubleSidedAttr().Get())
+        # a shot's cloth is a Mesh with the SimbakeClothAPI, which need not say doubleSided
+        double_sided = bool(mesh.GetDoubleSidedAttr().Get()) or "SimbakeClothAPI" in prim.GetAppliedSchemas()
         base = _color(str(prim.GetPath()) if not extra else str(prim.GetName()))
         front, back = (CLOTH_FRONT, CLOTH_BACK) if double_sided else (base, base)
         return _Drawable(prim, corners, faces, slots, front, back, **extra)
 
-    def _add_mesh(self, prim) -> None:
-        d = self._mesh_drawable(prim)
-        if d is not None:
-            self.drawables.append(d)
+    def _drawable(self, prim, **extra) -> _Drawable | None:
+        """A Mesh or a gprim (tessellated here, once) to draw; None for anything else."""
+        from pxr import UsdGeom
+
+        if prim.IsA(UsdGeom.Mesh):
+            return self._mesh_drawable(prim, **extra)
+        shape = tessellate(prim)
+        if shape is None:
+            return None
+        points, corners, normals = shape
+        color = _color(str(prim.GetPath()) if not extra else str(prim.GetName()))
+        n = len(corners)
+        return _Drawable(prim, corners, np.arange(n) // 3, np.arange(n), color, color,
+                         points=points, normals=normals, **extra)
 
     def _add_instancer(self, instancer) -> None:
         from pxr import Usd, UsdGeom
@@ -206,19 +395,26 @@ class CacheGeometry:
             if not root:
                 continue
             for prim in Usd.PrimRange(root):
-                if prim.IsA(UsdGeom.Mesh):
-                    d = self._mesh_drawable(prim, instancer=instancer, prototype=root, proto_index=index)
-                    if d is not None:
-                        self.drawables.append(d)
+                d = self._drawable(prim, instancer=instancer, prototype=root, proto_index=index)
+                if d is not None:
+                    self.drawables.append(d)
 
     # -- per frame -----------------------------------------------------------------------------
 
     def bounds(self, time: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """World bounds (display space) of everything drawn at `time`, or None if empty."""
-        from pxr import UsdGeom
+        """World bounds (display space) of everything drawn at `time` (but Planes, when there
+        is anything else), or None if empty."""
+        from pxr import Gf, UsdGeom
 
         cache = UsdGeom.BBoxCache(time, [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], True)
         box = cache.ComputeWorldBound(self.stage.GetPseudoRoot()).ComputeAlignedRange()
+        if self.planes:  # a 10 m or "infinite" ground, walls: framed is what else is drawn
+            framed = Gf.Range3d()
+            for prim in {(d.instancer.GetPrim() if d.instancer else d.prim) for d in self.drawables}:
+                if not prim.IsA(UsdGeom.Plane):
+                    framed.UnionWith(cache.ComputeWorldBound(prim).ComputeAlignedRange())
+            if not framed.IsEmpty():
+                box = framed
         if box.IsEmpty():
             return None
         lo, hi = np.array(box.GetMin()), np.array(box.GetMax())
@@ -234,14 +430,17 @@ class CacheGeometry:
         xforms = UsdGeom.XformCache(time)
         parts = []
         for d in self.drawables:
-            mesh = UsdGeom.Mesh(d.prim)
-            points = mesh.GetPointsAttr().Get(time)
-            if points is None or len(points) == 0 or len(d.corners) == 0:
-                continue
-            points = np.asarray(points, dtype=np.float64)
-            if d.corners.max() >= len(points):
-                continue  # topology and points disagree: nothing sensible to draw
-            normals = self._corner_normals(mesh, d, points, time)
+            if d.points is not None:  # a gprim: its tessellation
+                points, normals = d.points, d.normals
+            else:
+                mesh = UsdGeom.Mesh(d.prim)
+                points = mesh.GetPointsAttr().Get(time)
+                if points is None or len(points) == 0 or len(d.corners) == 0:
+                    continue
+                points = np.asarray(points, dtype=np.float64)
+                if d.corners.max() >= len(points):
+                    continue  # topology and points disagree: nothing sensible to draw
+                normals = self._corner_normals(mesh, d, points, time)
             p = points[d.corners]
             if d.instancer is None:
                 matrices = [np.array(xforms.GetLocalToWorldTransform(d.prim))]
@@ -617,11 +816,7 @@ class Preview:
         return lo, hi, extent, ground
 
     def _ground_height(self) -> float | None:
-        data = self.stage.GetRootLayer().customLayerData.get("simbake", {})
-        ground = data.get("ground") if hasattr(data, "get") else None
-        if not ground or "height" not in ground:
-            return None
-        return float(ground["height"])  # along the up axis, which is display space's y
+        return self.geometry.ground_height
 
     def frames(self, frames: Sequence[int], label: bool = True) -> Iterator[tuple[int, np.ndarray]]:
         """Renders each frame: (frame, image)."""

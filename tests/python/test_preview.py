@@ -24,12 +24,16 @@ CAMERA_AT = np.array([0.0, 1.0, 6.0])             # looking down -z (USD's camer
 BOX_CENTER, BOX_SIZE = np.array([-1.2, 0.5, 0.0]), 1.0
 
 
-def project(point) -> tuple[int, int]:
-    """Pixel (column, row from the top) of a world point seen by the test camera."""
-    x, y, z = np.asarray(point, dtype=float) - CAMERA_AT
+def project(point, camera_at=CAMERA_AT, down: bool = False, size=(W, H)) -> tuple[int, int]:
+    """Pixel (column, row from the top) of a world point seen by the test camera (at
+    `camera_at`, looking down -z; or, `down`, turned -90 degrees about x: looking down -y
+    with its picture's up along -z)."""
+    x, y, z = np.asarray(point, dtype=float) - camera_at
+    if down:
+        y, z = -z, y
     u = (FOCAL * x / -z) / (H_APERTURE / 2)  # -1..1 across the picture
     v = (FOCAL * y / -z) / (V_APERTURE / 2)
-    return int(round((u + 1) / 2 * W)), int(round((1 - v) / 2 * H))
+    return int(round((u + 1) / 2 * size[0])), int(round((1 - v) / 2 * size[1]))
 
 
 def write_stage(path: Path, frames: int = 3, fps: float = 24.0) -> Path:
@@ -262,7 +266,7 @@ def test_point_instancer_draws_each_instance_where_it_is(tmp_path):
     instancer = UsdGeom.PointInstancer.Define(stage, "/World/boxes")
     proto = UsdGeom.Xform.Define(stage, "/World/boxes/prototypes/cube")
     proto.AddTranslateOp().Set(Gf.Vec3d(0, 0.5, 0))
-    cube = UsdGeom.Cube.Define(stage, "/World/boxes/prototypes/cube/shape")  # not a Mesh: not drawn
+    cube = UsdGeom.Cube.Define(stage, "/World/boxes/prototypes/cube/shape")  # drawn, inside the mesh
     cube.CreateSizeAttr(0.1)
     mesh = UsdGeom.Mesh.Define(stage, "/World/boxes/prototypes/cube/mesh")
     h = 0.5
@@ -312,3 +316,218 @@ def test_z_up_stage_renders_as_its_y_up_twin(tmp_path):
     # the same picture, up to the rounding of the turned coordinates at a few edge pixels
     differ = np.abs(z_up.astype(int) - y_up.astype(int)).max(axis=2) > 24
     assert differ.mean() < 0.01, differ.mean()
+
+
+def gprim_stage(path: Path):
+    """The test stage without its box and cloth (the camera and ground stay), open for edits."""
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(write_stage(path)))
+    stage.RemovePrim("/World/box")
+    stage.RemovePrim("/World/sheet")
+    return stage
+
+
+def is_sky(pixel) -> bool:
+    from simbake.preview import SKY
+
+    return np.abs(pixel.astype(int) - np.round(np.array(SKY) * 255)).max() <= 3
+
+
+def test_gprims_are_where_the_camera_maps_them(tmp_path):
+    # a Cube (size), a Sphere (radius) and a Capsule (radius, height, axis X) standing on the
+    # ground, side by side: each shows its own colour at its projected centre, sky above it
+    # and ground beside it
+    from pxr import Gf, UsdGeom
+
+    path = tmp_path / "gprims.usda"
+    stage = gprim_stage(path)
+    cube = UsdGeom.Cube.Define(stage, "/World/cube")
+    cube.CreateSizeAttr(0.8)
+    cube.AddTranslateOp().Set(Gf.Vec3d(-1.8, 0.4, 0))
+    sphere = UsdGeom.Sphere.Define(stage, "/World/ball")
+    sphere.CreateRadiusAttr(0.4)
+    sphere.AddTranslateOp().Set(Gf.Vec3d(0, 0.4, 0))
+    capsule = UsdGeom.Capsule.Define(stage, "/World/pill")
+    capsule.CreateRadiusAttr(0.3)
+    capsule.CreateHeightAttr(0.8)  # the spine: 1.4 m long in all, x 1.1 to 2.5
+    capsule.CreateAxisAttr(UsdGeom.Tokens.x)
+    capsule.AddTranslateOp().Set(Gf.Vec3d(1.8, 0.3, 0))
+    stage.GetRootLayer().Save()
+    image = render(path)
+    for center, half_x, top, front in (((-1.8, 0.4, 0), 0.4, 0.8, 0.4), ((0, 0.4, 0), 0.4, 0.8, 0.4),
+                                       ((1.8, 0.3, 0), 0.7, 0.6, 0.3)):
+        c = np.array(center, dtype=float)
+        col, row = project(c + [0, 0, front])
+        shown = image[row, col]
+        assert not is_grey(shown) and not is_sky(shown), (center, shown)
+        # its ends along x, just inside, are it too
+        for side in (-1, 1):
+            col, row = project(c + [side * (half_x - 0.08), 0, 0.2])
+            assert not is_grey(image[row, col]), (center, side, image[row, col])
+        col, row = project(c + [0, 0, 0] + [0, 1.6 - c[1], 0])  # above: sky
+        assert is_sky(image[row, col]), (center, image[row, col])
+        col, row = project([c[0], top + 0.12, front])          # just over its top: not it
+        assert is_grey(image[row, col]) or is_sky(image[row, col]), (center, image[row, col])
+    for x in (-0.9, 0.85):  # between them: the ground
+        col, row = project([x, 0.0, 1.0])
+        assert is_grey(image[row, col]) and image[row, col].min() > 60, (x, image[row, col])
+
+
+def test_gprim_honours_a_scaled_and_turned_parent(tmp_path):
+    # a 0.4 m Cube at (0.5, 0.2, 0) under a parent turned -90 degrees about y (x -> z), scaled 2
+    # and moved 1 m along x: an 0.8 m cube at (1.0, 0.4, 1.0), standing on the ground
+    from pxr import Gf, UsdGeom
+
+    path = tmp_path / "parent.usda"
+    stage = gprim_stage(path)
+    parent = UsdGeom.Xform.Define(stage, "/World/parent")
+    parent.AddTranslateOp().Set(Gf.Vec3d(1.0, 0, 0))
+    parent.AddRotateYOp().Set(-90.0)
+    parent.AddScaleOp().Set(Gf.Vec3f(2, 2, 2))
+    cube = UsdGeom.Cube.Define(stage, "/World/parent/cube")
+    cube.CreateSizeAttr(0.4)
+    cube.AddTranslateOp().Set(Gf.Vec3d(0.5, 0.2, 0))
+    stage.GetRootLayer().Save()
+    image = render(path)
+    col, row = project([1.0, 0.4, 1.4])
+    cube = image[row, col].astype(int)
+    assert not is_grey(cube), cube
+    for point in ([1.0, 0.72, 1.4], [0.68, 0.08, 1.4], [1.32, 0.4, 1.4]):
+        col, row = project(point)
+        assert np.abs(image[row, col].astype(int) - cube).max() < 20, (point, image[row, col])
+    # not where the parent's turn, scale or move left out would put it (ground, sky, or the
+    # ground fading into the sky far behind)
+    for point in ([1.0, 0.95, 1.4], [2.0, 0.4, 0.0], [0.5, 0.2, 0.2], [0.0, 0.4, 1.0]):
+        col, row = project(point)
+        other = image[row, col].astype(int)
+        assert is_sky(other) or other.max() - other.min() < 20, (point, other)
+        assert np.abs(other - cube).max() > 30, (point, other)
+
+
+def test_shot_stage_shows_every_body_on_its_plane_ground(tmp_path):
+    # the shipped shot baked with --shot: every body (Cube, Sphere, Capsule gprims, the kinematic
+    # pusher) shows in its own colour where its composed transform puts it, seen from straight
+    # above at the first and last frames; the static block's front face shows from the front;
+    # the 10 m ground Plane is the checkered ground and not what the automatic camera frames
+    from pxr import Gf, Usd, UsdGeom
+
+    from simbake.preview import Preview, _color
+
+    shot = Path(__file__).resolve().parents[2] / "assets" / "scenes" / "shot.usda"
+    result = run("bake", str(shot), "-o", "c.usdc", "--shot", "view.usda", "-q", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    view = tmp_path / "view.usda"
+    stage = Usd.Stage.Open(str(view))
+    above, front = np.array([0.2, 9.0, 0.0]), np.array([2.2, 0.25, 6.0])
+    for name, at, down in (("above", above, True), ("front", front, False)):
+        camera = UsdGeom.Camera.Define(stage, f"/World/{name}")
+        camera.AddTranslateOp().Set(Gf.Vec3d(*at))
+        if down:
+            camera.AddRotateXOp().Set(-90.0)
+        camera.CreateFocalLengthAttr(FOCAL)
+        camera.CreateHorizontalApertureAttr(H_APERTURE)
+        camera.CreateVerticalApertureAttr(V_APERTURE)
+        camera.CreateClippingRangeAttr(Gf.Vec2f(0.1, 100.0))
+    stage.GetRootLayer().Save()
+    size = (2 * W, 2 * H)
+
+    def looks_like(image, point, path, camera_at, down):
+        col, row = project(point, camera_at, down, size)
+        pixel = image[row, col].astype(float)
+        base = np.array(_color(path))
+        cosine = pixel @ base / (np.linalg.norm(pixel) * np.linalg.norm(base))
+        return cosine > 0.998 and not is_grey(image[row, col]), (path, pixel, base * 255)
+
+    bodies = ["/World/Props/Crate", "/World/Props/Ball", "/World/Props/Pill", "/World/Pusher"]
+    for name, at, down in (("above", above, True), ("front", front, False)):
+        preview = Preview(view, size, f"/World/{name}")
+        try:
+            assert preview.geometry.ground_plane.GetPath() == "/World/Ground"
+            assert preview.geometry.ground_height == pytest.approx(0.0)
+            lo, hi, _, ground = preview.frame_range([preview.start, preview.end])
+            assert ground == pytest.approx(0.0) and (hi - lo)[[0, 2]].max() < 6.0, (lo, hi)  # not 10 m
+            for frame in (preview.start, preview.end):
+                image = next(iter(preview.frames([frame], label=False)))[1]
+                if not down:
+                    ok, why = looks_like(image, [2.2, 0.25, 1.7], "/World/Block", at, down)
+                    assert ok, (frame, why)
+                    continue
+                xforms = UsdGeom.XformCache(frame)
+                for path in bodies:
+                    center = np.array(xforms.GetLocalToWorldTransform(stage.GetPrimAtPath(path)).ExtractTranslation())
+                    assert center[1] > 0.1, (path, frame, center)  # above the ground, not sunk
+                    ok, why = looks_like(image, center, path, at, down)
+                    assert ok, (frame, why)
+        finally:
+            preview.close()
+
+
+@pytest.mark.parametrize("kind", ["Cube", "Sphere", "Capsule", "Cylinder", "Cone", "Plane"])
+@pytest.mark.parametrize("axis", ["X", "Y", "Z"])
+def test_gprim_tessellation_fills_its_extent_facing_out(kind, axis):
+    # the tessellation spans the extent USD computes for the prim, and every triangle is
+    # wound counterclockwise seen from the side its normals face, which is outwards
+    from pxr import Usd, UsdGeom
+
+    from simbake.preview import tessellate
+
+    stage = Usd.Stage.CreateInMemory()
+    prim = stage.DefinePrim("/shape", kind)
+    for name, value in (("size", 0.7), ("radius", 0.3), ("height", 1.1), ("width", 3.0), ("length", 0.5)):
+        if prim.GetAttribute(name):
+            prim.GetAttribute(name).Set(value)
+    if prim.GetAttribute("axis"):
+        prim.GetAttribute("axis").Set(axis)
+    points, corners, normals = tessellate(prim)
+    extent = np.array(UsdGeom.Boundable(prim).ComputeExtent(Usd.TimeCode.Default()))
+    assert np.allclose(points.min(axis=0), extent[0], atol=1e-6), (points.min(axis=0), extent)
+    assert np.allclose(points.max(axis=0), extent[1], atol=1e-6), (points.max(axis=0), extent)
+    tri = points[corners].reshape(-1, 3, 3)
+    area = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    facing = normals.reshape(-1, 3, 3).mean(axis=1)
+    solid = np.linalg.norm(area, axis=1) > 1e-9
+    assert (np.einsum("ij,ij->i", area[solid], facing[solid]) > 0).all()
+    assert (np.einsum("ij,ij->i", tri.mean(axis=1)[solid], facing[solid]) >= -1e-9).all()
+
+
+def test_a_wall_plane_is_a_quad_and_a_ground_plane_the_ground(tmp_path):
+    # a 1.6 x 1.0 m Plane facing the camera (axis Z) is drawn where it is, as a finite quad;
+    # a 10 m Plane facing up at the recorded ground's height is the checkered ground (not a
+    # quad over it), and neither blows up the automatic camera's framing of the box beside them
+    from pxr import Gf, UsdGeom
+
+    from simbake.preview import Preview
+
+    path = tmp_path / "planes.usda"
+    stage = gprim_stage(path)
+    wall = UsdGeom.Plane.Define(stage, "/World/wall")
+    wall.CreateAxisAttr(UsdGeom.Tokens.z)
+    wall.CreateWidthAttr(1.6)
+    wall.CreateLengthAttr(1.0)
+    wall.AddTranslateOp().Set(Gf.Vec3d(1.0, 0.6, 0))
+    ground = UsdGeom.Plane.Define(stage, "/World/ground")
+    ground.CreateAxisAttr(UsdGeom.Tokens.y)
+    ground.CreateWidthAttr(10.0)
+    ground.CreateLengthAttr(10.0)
+    cube = UsdGeom.Cube.Define(stage, "/World/cube")
+    cube.CreateSizeAttr(1.0)
+    cube.AddTranslateOp().Set(Gf.Vec3d(-1.2, 0.5, 0))
+    stage.GetRootLayer().Save()
+    image = render(path)
+    col, row = project([1.0, 0.6, 0])
+    assert not is_grey(image[row, col]), image[row, col]
+    for point in ([1.0, 1.25, 0], [2.0, 0.6, 0]):  # beyond its edges: sky, ground
+        col, row = project(point)
+        assert is_grey(image[row, col]) or is_sky(image[row, col]), (point, image[row, col])
+    for point in ([0.0, 0.0, 2.0], [-1.2, 0.0, 1.5]):  # the checkered ground, grey
+        col, row = project(point)
+        assert is_grey(image[row, col]) and image[row, col].min() > 60, (point, image[row, col])
+    preview = Preview(path, (W, H))
+    try:
+        assert preview.geometry.ground_plane.GetPath() == "/World/ground"
+        assert [d.prim.GetName() for d in preview.geometry.drawables] == ["wall", "cube"]
+        lo, hi, _, _ = preview.frame_range([1])
+        assert np.allclose(lo, [-1.7, 0, -0.5]) and np.allclose(hi, [-0.7, 1, 0.5]), (lo, hi)
+    finally:
+        preview.close()
