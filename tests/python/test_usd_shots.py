@@ -573,3 +573,34 @@ def test_bodies_under_a_moving_parent_or_another_body_fall_freely(tmp_path):
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "c.usda"))
     assert list(layer.GetAttributeAtPath("/World/Crate/Rider.xformOpOrder").default)[0] == "!resetXformStack!"
 
+
+def test_check_judges_what_simbake_wrote_not_the_inputs_animation(shipped, tmp_path):
+    """`simbake check` on a shot's cache and --shot stage (m/Y-up, cm/Z-up, and over clips):
+    clean, though the pusher is keyed at two time codes only and the units are the input's;
+    a frame missing from what simbake wrote is still caught."""
+    from simbake.check import check_cache
+
+    for name, (cache, shot_stage) in shipped.items():
+        assert check_cache(cache) == [], name
+        assert check_cache(shot_stage) == [], name
+    clipped, stage = tmp_path / "clipped.usdc", tmp_path / "clipped_shot.usda"
+    assert main(["bake", str(SCENES / "shot.usda"), "-o", str(clipped), "--shot", str(stage),
+                 "--clips", "10", "-q"]) == 0
+    assert check_cache(stage) == []
+    assert main(["check", str(stage)]) == 0
+    # one of simbake's own samples gone: reported
+    cache, _ = shipped["shot"]
+    broken = tmp_path / "broken.usda"
+    layer = Sdf.Layer.OpenAsAnonymous(str(cache))
+    layer.EraseTimeSample("/World/Props/Ball.xformOp:translate", 5.0)
+    layer.Export(str(broken))
+    import shutil
+
+    shutil.copytree(cache.with_name("shot.cache.vdb"), tmp_path / "shot.cache.vdb")  # the level set it names
+    stage_layer = Sdf.Layer.CreateNew(str(tmp_path / "broken_shot.usda"))
+    stage_layer.TransferContent(Sdf.Layer.FindOrOpen(str(shipped["shot"][1])))
+    stage_layer.subLayerPaths[0] = "./broken.usda"
+    stage_layer.subLayerPaths[1] = str(SCENES / "shot.usda")
+    stage_layer.Save()
+    problems = check_cache(tmp_path / "broken_shot.usda")
+    assert len(problems) == 1 and "/World/Props/Ball.xformOp:translate: 1 frame(s) without a time sample, first 5" in problems[0]
