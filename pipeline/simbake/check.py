@@ -8,6 +8,11 @@
   break in some consumers, a cache written by :class:`simbake.usd_writer.CacheWriter` has
   none, so a warning on a simbake cache is worth a look. Pass ``warnings=False`` to keep
   only errors. Info-level findings are never reported.
+* A USD shot's cache (version 2: the cache layer, or a ``--shot`` stage composing it over the
+  input; its provenance names a USD scene) keeps the input's axes, units and default prim
+  (any valid ones), and the every-frame rule below applies to the samples simbake wrote
+  (its layers and value clips), not to the input's own animation (a kinematic prop keyed at
+  two time codes holds or interpolates between them, as the input says).
 * Our rules (DESIGN.md, "USD cache, version 1"):
   - the file exists and opens as a USD stage;
   - stage metadata: ``defaultPrim = "World"`` naming an existing prim, ``upAxis = "Y"``,
@@ -56,14 +61,17 @@ def check_cache(path: str | Path, *, warnings: bool = True) -> list[str]:
 
     problems: list[str] = []
     problems += _validators(stage, path, warnings)
-    start, end = _metadata(stage, path, problems)
+    shot = _is_shot(stage)
+    start, end = _metadata(stage, path, problems, shot)
     frames = None
     if start is not None and end is not None:
         frames = np.arange(int(start), int(end) + 1, dtype=np.float64)
     for prim in stage.TraverseAll():
         for attr in prim.GetAttributes():
             if attr.HasAuthoredValue() or attr.GetNumTimeSamples():
-                _check_attribute(attr, frames, path, problems)
+                # a shot's own animation (its samples where it put them) is not simbake's to judge
+                ours = not shot or _samples_are_ours(attr)
+                _check_attribute(attr, frames if ours else None, path, problems)
         if prim.IsA(UsdGeom.PointBased):
             _check_extent(UsdGeom.PointBased(prim), path, problems)
     return problems
@@ -114,10 +122,57 @@ def _validators(stage, path: Path, warnings: bool) -> list[str]:
     return out
 
 
-def _metadata(stage, path: Path, problems: list[str]) -> tuple[float | None, float | None]:
+def _ours(layer) -> bool:
+    """A layer simbake wrote (a cache, a shot's cache layer or one of its clips)."""
+    try:
+        return "simbake" in dict(layer.customLayerData)
+    except Exception:
+        return False
+
+
+def _is_shot(stage) -> bool:
+    """A USD shot's cache (version 2): the cache layer itself, or a --shot stage composing it
+    over the input; its provenance names a USD scene. Its axes, units and default prim are
+    the input's, and the input's own animation is the input's."""
+    for layer in stage.GetLayerStack():
+        if _ours(layer):
+            scene = dict(layer.customLayerData)["simbake"].get("scene", "")
+            if str(scene).lower().endswith((".usd", ".usda", ".usdc")):
+                return True
+    return False
+
+
+def _samples_are_ours(attr) -> bool:
+    """Whether the attribute's time samples come from simbake (its layer or value clips),
+    not from the input shot's own animation."""
+    info = attr.GetResolveInfo()
+    if info.GetSource() == Usd.ResolveInfoSourceValueClips:
+        return True
+    for spec in attr.GetPropertyStack():
+        if spec.HasInfo("timeSamples"):
+            return _ours(spec.layer)
+    return True
+
+
+def _metadata(stage, path: Path, problems: list[str], shot: bool = False) -> tuple[float | None, float | None]:
 
     layer = stage.GetRootLayer()
     dp = stage.GetDefaultPrim()
+    if shot:  # the input's axes, units and default prim (any valid ones)
+        if layer.HasDefaultPrim() and not dp:
+            problems.append(f"{path}: defaultPrim {layer.defaultPrim!r} names no prim")
+        if UsdGeom.GetStageUpAxis(stage) not in ("Y", "Z"):
+            problems.append(f"{path}: upAxis must be \"Y\" or \"Z\"")
+        if not UsdGeom.GetStageMetersPerUnit(stage) > 0:
+            problems.append(f"{path}: metersPerUnit must be positive")
+        if not UsdPhysics.GetStageKilogramsPerUnit(stage) > 0:
+            problems.append(f"{path}: kilogramsPerUnit must be positive")
+    else:
+        _cache_v1_metadata(stage, layer, dp, path, problems)
+    return _time_codes(layer, path, problems)
+
+
+def _cache_v1_metadata(stage, layer, dp, path: Path, problems: list[str]) -> None:
     if not layer.HasDefaultPrim() or layer.defaultPrim != "World":
         problems.append(f"{path}: defaultPrim must be \"World\", got "
                         f"{layer.defaultPrim if layer.HasDefaultPrim() else 'none'!r}")
@@ -131,6 +186,9 @@ def _metadata(stage, path: Path, problems: list[str]) -> tuple[float | None, flo
     if (not UsdPhysics.StageHasAuthoredKilogramsPerUnit(stage)
             or UsdPhysics.GetStageKilogramsPerUnit(stage) != 1.0):
         problems.append(f"{path}: kilogramsPerUnit must be 1")
+
+
+def _time_codes(layer, path: Path, problems: list[str]) -> tuple[float | None, float | None]:
     if not layer.HasTimeCodesPerSecond():
         problems.append(f"{path}: timeCodesPerSecond is not set")
     if not layer.HasFramesPerSecond():

@@ -156,7 +156,7 @@ def parser() -> argparse.ArgumentParser:
                                           "(a USD shot: SHOT.cache.usdc) here")
     b.add_argument("--shot", help="USD shot only: also write this stage, the cache sublayered over the input")
     b.add_argument("--instancing", choices=("auto", "always", "never"), default="auto",
-                   help="bodies sharing one shape as a PointInstancer: auto (from 100 bodies), always, never")
+                   help="TOML scenes: bodies sharing one shape as a PointInstancer: auto (from 100 bodies), always, never")
     b.add_argument("--clips", type=int, default=None, metavar="N",
                    help="write frames into value-clip layers of N frames each in OUT.clips/, stitched by OUT")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

@@ -236,11 +236,16 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
                   clips: int | None = None, level_sets: dict | None = None):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
     layer of overs for a USD shot (simbake.usd_layer)."""
+    level_sets = level_sets or {}
     if scene.shot is not None:
+        if clips is not None:
+            from .usd_clips import ShotClipsWriter
+
+            return ShotClipsWriter(output, scene, clip_frames=clips, provenance=_provenance(scene),
+                                   level_sets=level_sets)
         from .usd_layer import ShotLayerWriter
 
-        return ShotLayerWriter(output, scene, provenance=_provenance(scene))
-    level_sets = level_sets or {}
+        return ShotLayerWriter(output, scene, provenance=_provenance(scene), level_sets=level_sets)
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
@@ -325,8 +330,10 @@ def bake(scene: Scene, output: str | Path, *,
     beside the cache as CACHE.qa.json, summarized in its customLayerData. For a USD shot the
     cache is a layer of overs; `shot` also writes a stage that sublayers it over the input.
     `instancing` ("auto", "always", "never"): bodies sharing a shape as PointInstancers
-    (TOML scenes; see instancer_groups). `clips` N: value-clip layers of N frames each in
-    OUTPUT_STEM.clips/, stitched by the output (TOML scenes; simbake.usd_clips).
+    (TOML scenes only: a shot's cache overrides the input's own prims; see instancer_groups).
+    `clips` N: value-clip layers of N frames each in OUTPUT_STEM.clips/, stitched by the
+    output (simbake.usd_clips). Every .vdb the bake used is copied into OUTPUT_STEM.vdb/ and
+    shown as a guide Volume under its body.
     """
     output = Path(output)
     check_scene(scene)  # a Scene made in Python (or from USD) meets the same range as a file's
@@ -337,8 +344,6 @@ def bake(scene: Scene, output: str | Path, *,
     if clips is not None:
         if isinstance(clips, bool) or not isinstance(clips, int) or clips < 1:
             raise SceneError(scene.source, "--clips", f"must be a whole number of frames >= 1, got {clips!r}")
-        if scene.shot is not None:
-            raise SceneError(scene.source, "--clips", "value clips are written for TOML scenes only (not yet for USD shots)")
     shot = Path(shot) if shot is not None else None
     if scene.shot is not None or shot is not None:
         _check_shot_outputs(scene, output, shot)
@@ -365,8 +370,8 @@ def _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, insta
     total = scene.frame_count
     recorder = QualityRecorder(scene) if qa else None
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
-    level_sets, level_set_tmp = ({}, None) if scene.shot is not None else \
-        _level_set_files(scene, assets, output, instancer_groups(scene, instancing))
+    groups = [] if scene.shot is not None else instancer_groups(scene, instancing)  # TOML only
+    level_sets, level_set_tmp = _level_set_files(scene, assets, output, groups)
     try:
         with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets) as writer:
             max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile)

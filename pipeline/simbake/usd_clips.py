@@ -59,8 +59,11 @@ class ClipsWriter(StreamingWriter):
     def _open(self, first: int) -> None:
         last = min(first + self.clip_frames, self.end_frame)  # shares `last` with the next clip
         name = f"clip.{len(self._clips) + 1:04d}.usdc"
-        self._writer = CacheWriter(self._tmp / name, start_frame=first, end_frame=last, **self._args)
+        self._writer = self._clip_writer(self._tmp / name, first, last)
         self._clips.append((name, first, last))
+
+    def _clip_writer(self, path: Path, first: int, last: int) -> StreamingWriter:
+        return CacheWriter(path, start_frame=first, end_frame=last, **self._args)
 
     def write_frame(self, frame: int, *args, **kwargs) -> None:
         if self._writer is None:
@@ -88,9 +91,10 @@ class ClipsWriter(StreamingWriter):
             topology = Sdf.Layer.CreateNew(str(self._tmp / "topology.usdc"))
             UsdUtils.StitchClipsTopology(topology, files)
             topology.Save()
-            manifest = Sdf.Layer.CreateNew(str(self._tmp / "manifest.usda"))
-            UsdUtils.StitchClipsManifest(manifest, topology, files, Sdf.Path("/World"))
-            manifest.Save()
+            for root, name in self._clip_roots():
+                manifest = Sdf.Layer.CreateNew(str(self._tmp / name))
+                UsdUtils.StitchClipsManifest(manifest, topology, files, Sdf.Path(root))
+                manifest.Save()
             result = self._result_layer()
             # into place: the folder first (an older one is replaced), then the output
             old = None
@@ -109,6 +113,25 @@ class ClipsWriter(StreamingWriter):
         self._done = True
         return self.path
 
+    def _clip_roots(self) -> list[tuple[str, str]]:
+        """(prim path that carries the clips metadata, its manifest's file name)."""
+        return [("/World", "manifest.usda")]
+
+    def _set_clips(self, layer: Sdf.Layer, root: str, manifest: str) -> None:
+        """``clips`` metadata on ``root`` (an over): every clip, stage time = clip time."""
+        folder = f"./{self.folder.name}"
+        # stage time is clip time everywhere: one identity mapping, no jumps (a jump would add
+        # a sample just before each clip's start)
+        times = [(float(self.start_frame), float(self.start_frame)), (float(self.end_frame), float(self.end_frame))]
+        prim = Sdf.CreatePrimInLayer(layer, root)  # an over; authored without a stage,
+        prim.SetInfo("clips", {"default": {  # so nothing resolves before the files exist
+            "assetPaths": Sdf.AssetPathArray([f"{folder}/{name}" for name, _, _ in self._clips]),
+            "primPath": root,
+            "active": Vt.Vec2dArray([(float(a), float(k)) for k, (_, a, _) in enumerate(self._clips)]),
+            "times": Vt.Vec2dArray(times),
+            "manifestAssetPath": Sdf.AssetPath(f"{folder}/{manifest}"),
+        }})
+
     def _result_layer(self) -> Sdf.Layer:
         """The output: metadata, the topology sublayered, clips metadata on /World."""
         folder = f"./{self.folder.name}"
@@ -124,17 +147,7 @@ class ClipsWriter(StreamingWriter):
         _merge(data, _to_usd(self._layer_data, "customLayerData"))
         layer.customLayerData = data
         layer.subLayerPaths.append(f"{folder}/topology.usdc")
-        # stage time is clip time everywhere: one identity mapping, no jumps (a jump would add
-        # a sample just before each clip's start)
-        times = [(float(self.start_frame), float(self.start_frame)), (float(self.end_frame), float(self.end_frame))]
-        world = Sdf.CreatePrimInLayer(layer, "/World")  # an over; authored without a stage,
-        world.SetInfo("clips", {"default": {  # so nothing resolves before the files exist
-            "assetPaths": Sdf.AssetPathArray([f"{folder}/{name}" for name, _, _ in self._clips]),
-            "primPath": "/World",
-            "active": Vt.Vec2dArray([(float(a), float(k)) for k, (_, a, _) in enumerate(self._clips)]),
-            "times": Vt.Vec2dArray(times),
-            "manifestAssetPath": Sdf.AssetPath(f"{folder}/manifest.usda"),
-        }})
+        self._set_clips(layer, "/World", "manifest.usda")
         return layer
 
     def abort(self) -> None:
@@ -150,3 +163,50 @@ def _export(layer: Sdf.Layer, path: str) -> None:
     fmt = "usda" if path.endswith(".usda") else "usdc"
     if not layer.Export(path, args={"format": fmt}):
         raise OSError(f"{path}: writing the clips layer failed")
+
+
+class ShotClipsWriter(ClipsWriter):
+    """``--clips N`` for a USD shot: each clip is a shot cache layer of ``over``s
+    (usd_layer.ShotLayerWriter) holding N + 1 frames' time samples at the input's own prim
+    paths; the topology (the overs, xformOpOrder, scale, the level-set Volumes: everything
+    but the samples) is sublayered by the output, which carries the input's stage metadata
+    and ``clips`` metadata on each root prim the cache writes under (one manifest each).
+    Composed over the input it reads back the same values at every frame as the single-file
+    shot cache."""
+
+    def __init__(self, path: str | Path, scene, *, clip_frames: int, provenance: Mapping[str, Any] = {},
+                 level_sets: Mapping | None = None):
+        shot = scene.shot
+        super().__init__(path, clip_frames=clip_frames, fps=shot.time_codes_per_second,
+                         start_frame=scene.start_frame, end_frame=scene.end_frame, bodies=(),
+                         provenance=provenance)
+        self._scene = scene
+        self._level_sets = dict(level_sets or {})
+        self._roots: list[tuple[str, str]] = []
+
+    def _clip_writer(self, path: Path, first: int, last: int) -> StreamingWriter:
+        from .usd_layer import ShotLayerWriter
+
+        writer = ShotLayerWriter(path, self._scene, provenance=self._provenance, start_frame=first,
+                                 end_frame=last, level_sets=self._level_sets)
+        if not self._roots:  # the root prims of everything sampled: one clip set each
+            roots = sorted({str(Sdf.Path(p).GetPrefixes()[0]) for p in writer.sampled_prims}) or ["/World"]
+            self._roots = [(root, "manifest.usda" if len(roots) == 1 else f"manifest.{root[1:]}.usda")
+                           for root in roots]
+        return writer
+
+    def _clip_roots(self) -> list[tuple[str, str]]:
+        return self._roots
+
+    def _result_layer(self) -> Sdf.Layer:
+        from .usd_layer import copy_stage_metadata
+
+        layer = Sdf.Layer.CreateAnonymous(".usda")
+        copy_stage_metadata(layer, self._scene.shot)
+        data = _to_usd(self._provenance, "customLayerData")
+        _merge(data, _to_usd(self._layer_data, "customLayerData"))
+        layer.customLayerData = data
+        layer.subLayerPaths.append(f"./{self.folder.name}/topology.usdc")
+        for root, manifest in self._roots:
+            self._set_clips(layer, root, manifest)
+        return layer

@@ -100,14 +100,18 @@ class ShotLayerWriter(StreamingWriter):
     """
 
     def __init__(self, path: str | Path, scene, *, provenance: Mapping[str, Any] = {},
-                 flush_every: int = 50):
+                 flush_every: int = 50, start_frame: int | None = None, end_frame: int | None = None,
+                 level_sets: Mapping[int, Path] | None = None):
         self.path = Path(path)
         suffix = self.path.suffix.lower()
         if suffix not in FORMATS:
             raise ValueError(f"{self.path}: unknown USD file extension {self.path.suffix!r}")
         shot = scene.shot
         self.shot, self.scene = shot, scene
-        self.start_frame, self.end_frame = scene.start_frame, scene.end_frame
+        # a clip (usd_clips.ShotClipsWriter) writes a part of the shot's frames
+        self.start_frame = scene.start_frame if start_frame is None else int(start_frame)
+        self.end_frame = scene.end_frame if end_frame is None else int(end_frame)
+        self._level_sets = dict(level_sets or {})
         self.flush_every = int(flush_every) if shot.cloths else 0
         self._next_frame = self.start_frame
         tag = f".{self.path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp"
@@ -131,6 +135,8 @@ class ShotLayerWriter(StreamingWriter):
         copy_stage_metadata(layer, shot)
         layer.customLayerData = _to_usd(dict(provenance), "customLayerData")
 
+        # prims this layer writes (value clips go on their root prims)
+        self.sampled_prims = [b.prim_path for b in shot.bodies] + [c.prim_path for c in shot.cloths]
         self._bodies = []  # (body index, translate path, orient path, Vec3 type, Quat type)
         for b in shot.bodies:
             spec = Sdf.CreatePrimInLayer(layer, b.prim_path)  # `over`, ancestors too
@@ -170,6 +176,88 @@ class ShotLayerWriter(StreamingWriter):
                 paths.append(attr.path)
             to_local = np.array(c.world_to_local, dtype=np.float64)
             self._cloths.append((c.index, to_local, np.linalg.inv(to_local[:3, :3]), paths))
+        self._volume_tracks, self._volume_keyed = [], []
+        if self._level_sets:
+            self._level_set_volumes(layer)
+
+    def _level_set_volumes(self, layer: Sdf.Layer) -> None:
+        """Each level set the bake used: a ``def Volume`` (purpose guide) whose
+        ``OpenVDBAsset`` field "surface" names the .vdb by a path relative to the cache.
+
+        The Volume is ``levelset`` under its body's prim (an ``over``) when that prim is not
+        itself a Gprim; under a Gprim (a Mesh, Capsule or Cylinder collider that is its own
+        body) OpenUSD forbids a nested Gprim, so it is ``<name>_levelset`` beside the prim,
+        its ``xformOp:transform`` time-sampled to follow it. The grid is in simbake's body
+        frame (metres, Y up); the transform takes it into the prim's own space (stage units
+        and axes, the prim's scale undone), from the input's transform at the start."""
+        from pxr import Usd, UsdGeom
+
+        shot, scene = self.shot, self.scene
+        stage = Usd.Stage.Open(str(shot.path), Usd.Stage.LoadNone)
+        xforms = UsdGeom.XformCache(Usd.TimeCode(shot.start_time_code))
+        C, mpu = shot.axes, shot.meters_per_unit
+        rows = {b.index: row for row, b in enumerate(shot.bodies)}
+        self._volume_tracks = []  # (row of a dynamic body, transform path, M (4x4, column vectors))
+        self._volume_keyed = []   # (transform path, (frames, 4, 4) row-vector matrices from the start)
+        for index, vdb in sorted(self._level_sets.items()):
+            body = scene.bodies[index]
+            prim = stage.GetPrimAtPath(body.prim_path)
+            if not prim:
+                continue
+            # the body frame (m, simbake axes) -> stage world, column vectors: x = r C^T b / mpu + t
+            w, x, y, z = body.orientation
+            R = np.array(Gf.Matrix3d(Gf.Rotation(Gf.Quatd(w, Gf.Vec3d(x, y, z)))).GetTranspose())
+            to_world = np.eye(4)
+            to_world[:3, :3] = C.T @ R / mpu
+            to_world[:3, 3] = C.T @ np.asarray(body.position, dtype=np.float64) / mpu
+            prim_world = np.array(xforms.GetLocalToWorldTransform(prim)).T  # Gf is row-vector
+            local = np.linalg.inv(prim_world) @ to_world  # the grid in the prim's own space
+            gprim = prim.IsA(UsdGeom.Gprim)
+            if gprim:
+                parent_path = prim.GetPath().GetParentPath()
+                name = f"{prim.GetName()}_levelset"
+                while stage.GetPrimAtPath(parent_path.AppendChild(name)):
+                    name += "_"
+                if parent_path == Sdf.Path.absoluteRootPath:
+                    volume = Sdf.PrimSpec(layer, name, Sdf.SpecifierDef, "Volume")
+                else:
+                    volume = Sdf.PrimSpec(Sdf.CreatePrimInLayer(layer, parent_path), name, Sdf.SpecifierDef, "Volume")
+            else:
+                volume = Sdf.PrimSpec(Sdf.CreatePrimInLayer(layer, body.prim_path), "levelset",
+                                      Sdf.SpecifierDef, "Volume")
+            Sdf.AttributeSpec(volume, "purpose", _TN.Token, variability=Sdf.VariabilityUniform).default = "guide"
+            if gprim:
+                xformable = UsdGeom.Xformable(prim)
+                reset = xformable.GetResetXformStack() or (index in rows and self.shot.bodies[rows[index]].reset_xform_stack)
+                order = (["!resetXformStack!"] if reset else []) + ["xformOp:transform"]
+                op = Sdf.AttributeSpec(volume, "xformOp:transform", _TN.Matrix4d)
+                if index in rows:  # dynamic: the cache's pose of the prim, every frame
+                    self._volume_tracks.append((rows[index], op.path, local))
+                elif xformable.TransformMightBeTimeVarying():  # kinematic: the input's animation
+                    mats = np.array([np.array(xformable.GetLocalTransformation(Usd.TimeCode(code)))
+                                     for code in range(int(shot.start_time_code), int(shot.end_time_code) + 1)])
+                    self._volume_keyed.append((op.path, np.einsum("ij,fjk->fik", local.T, mats)))
+                else:  # static
+                    op.default = Gf.Matrix4d((local.T @ np.array(xformable.GetLocalTransformation())).tolist())
+            elif not np.allclose(local, np.eye(4), rtol=0.0, atol=1e-12):
+                order = ["xformOp:transform"]
+                Sdf.AttributeSpec(volume, "xformOp:transform", _TN.Matrix4d).default = Gf.Matrix4d(local.T.tolist())
+            else:
+                order = []
+            if order:
+                Sdf.AttributeSpec(volume, "xformOpOrder", _TN.TokenArray, variability=Sdf.VariabilityUniform
+                                  ).default = Vt.TokenArray(order)
+            field = Sdf.PrimSpec(volume, "surface", Sdf.SpecifierDef, "OpenVDBAsset")
+            relative = os.path.relpath(Path(vdb).absolute(), self.path.parent.absolute())
+            Sdf.AttributeSpec(field, "filePath", _TN.Asset).default = Sdf.AssetPath(
+                relative if relative.startswith("..") else f"./{relative}")
+            Sdf.AttributeSpec(field, "fieldName", _TN.Token).default = "surface"
+            rel = Sdf.RelationshipSpec(volume, "field:surface", custom=False)
+            rel.targetPathList.explicitItems = [field.path]
+            points = np.asarray(body.shape.mesh_vertices, dtype=np.float32)  # the band hugs the surface
+            Sdf.AttributeSpec(volume, "extent", _TN.Float3Array).default = Vt.Vec3fArray.FromNumpy(
+                np.stack([points.min(axis=0), points.max(axis=0)]))
+            self.sampled_prims.append(str(volume.path))
 
     # -- frames -------------------------------------------------------------------------------
 
@@ -193,7 +281,7 @@ class ShotLayerWriter(StreamingWriter):
         parent_q, parent_t, parent_s = self._parent_q, self._parent_t, self._parent_s
         if self._tracks:  # parents that move: their pose at this frame
             parent_q, parent_t, parent_s = parent_q.copy(), parent_t.copy(), parent_s.copy()
-            k = frame - self.start_frame
+            k = frame - self.scene.start_frame  # tracks start at the shot's first frame
             for row, qs, ts, ss in self._tracks:
                 parent_q[row], parent_t[row], parent_s[row] = qs[k], ts[k], ss[k]
         parent_inv = _qconj(parent_q)
@@ -223,6 +311,15 @@ class ShotLayerWriter(StreamingWriter):
             for (_, t_path, q_path, t_type, q_type), t, q in zip(self._bodies, t_local, q_local):
                 layer.SetTimeSample(t_path, time, t_type(*t))
                 layer.SetTimeSample(q_path, time, q_type(float(q[0]), float(q[1]), float(q[2]), float(q[3])))
+            for row, op_path, local in self._volume_tracks:  # Volumes beside Gprim bodies
+                m = np.eye(4)
+                m[:3, :3] = np.array(Gf.Matrix3d(Gf.Rotation(Gf.Quatd(*q_local[row])))).T
+                if shot.bodies[row].scale is not None:
+                    m[:3, :3] = m[:3, :3] * np.asarray(shot.bodies[row].scale)
+                m[:3, 3] = t_local[row]
+                layer.SetTimeSample(op_path, time, Gf.Matrix4d((m @ local).T.tolist()))
+            for op_path, mats in self._volume_keyed:
+                layer.SetTimeSample(op_path, time, Gf.Matrix4d(mats[frame - self.scene.start_frame].tolist()))
             for paths, p32, n32, v32, extent in cloth_data:
                 layer.SetTimeSample(paths[0], time, Vt.Vec3fArray.FromNumpy(p32))
                 layer.SetTimeSample(paths[1], time, Vt.Vec3fArray.FromNumpy(n32))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,3 +102,65 @@ def test_bad_clip_lengths_are_one_line_errors(tmp_path, capsys, value):
     err = capsys.readouterr().err
     assert "--clips: must be a whole number of frames >= 1" in err and err.count("\n") == 1
     assert not (tmp_path / "c.usdc").exists() and not (tmp_path / "c.clips").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# a USD shot's cache layer as clips
+# --------------------------------------------------------------------------------------------
+
+SHOTS = Path(__file__).resolve().parents[2] / "assets" / "scenes"
+
+
+def _composed(stage, frame):
+    """Every Xformable's composed world transform and every Mesh's points at `frame`."""
+    from pxr import UsdGeom
+
+    out = {}
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Xformable):
+            out[f"{prim.GetPath()} world"] = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(frame))
+        if prim.IsA(UsdGeom.Mesh):
+            for name in ("points", "normals", "velocities", "extent"):
+                value = prim.GetAttribute(name).Get(frame)
+                if value is not None:
+                    out[f"{prim.GetPath()}.{name}"] = np.array(value, dtype=np.float64)
+    return out
+
+
+@pytest.mark.parametrize("shot, clip_frames", [("shot.usda", 10), ("shot_cm_zup.usda", 1)])
+def test_a_shots_clips_read_back_as_its_single_file_cache(tmp_path, shot, clip_frames):
+    """The --shot stage over clips: the same world transforms (bodies, the pusher, the level-set
+    Volume) and cloth points as over the single-file shot cache, at every frame."""
+    from pxr import Sdf
+
+    single, clipped = tmp_path / "single.usdc", tmp_path / "clipped.usdc"
+    assert main(["bake", str(SHOTS / shot), "-o", str(single), "--shot", str(tmp_path / "single_shot.usda"), "-q"]) == 0
+    assert main(["bake", str(SHOTS / shot), "-o", str(clipped), "--shot", str(tmp_path / "clipped_shot.usda"),
+                 "--clips", str(clip_frames), "-q"]) == 0
+    folder = tmp_path / "clipped.clips"
+    clips = sorted(folder.glob("clip.*.usdc"))
+    a = Usd.Stage.Open(str(tmp_path / "single_shot.usda"))
+    b = Usd.Stage.Open(str(tmp_path / "clipped_shot.usda"))
+    start, end = int(a.GetStartTimeCode()), int(a.GetEndTimeCode())
+    assert len(clips) == math.ceil((end - start) / clip_frames)
+    assert {p.name for p in folder.iterdir()} == {p.name for p in clips} | {"topology.usdc", "manifest.usda"}
+    assert (b.GetStartTimeCode(), b.GetEndTimeCode()) == (start, end)
+    for frame in range(start, end + 1):
+        va, vb = _composed(a, frame), _composed(b, frame)
+        assert va.keys() == vb.keys()
+        assert any(k.endswith("Sheet.points") for k in va)
+        for key in va:
+            np.testing.assert_array_equal(va[key], vb[key], err_msg=f"{key} at {frame}")
+    # the output and every clip hold only overs at the input's prims (the level-set Volume is new)
+    source = Usd.Stage.Open(str(SHOTS / shot))
+    for path in [clipped, *clips, folder / "topology.usdc"]:
+        layer = Sdf.Layer.FindOrOpen(str(path))
+        specs = []
+        layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: specs.append(p) if p.IsPrimPath() else None)
+        for p in specs:
+            if "levelset" not in p.pathString:
+                assert layer.GetPrimAtPath(p).specifier == Sdf.SpecifierOver and source.GetPrimAtPath(p), (path, p)
+    assert Sdf.Layer.FindOrOpen(str(clipped)).pseudoRoot.GetInfo("upAxis") == source.GetRootLayer().pseudoRoot.GetInfo("upAxis")
+    context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
+    assert [e.GetMessage() for e in context.Validate(b)] == []
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]

@@ -236,6 +236,10 @@ def test_the_cache_layer_holds_only_overs_at_input_paths(shipped):
         layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: specs.append(p) if p.IsPrimPath() else None)
         assert specs
         for path in specs:
+            if "levelset" in path.pathString:  # new prims: the capsule's level set as a guide Volume (beside it: a Gprim)
+                assert path.pathString.startswith("/World/Props/Pill_levelset"), path
+                assert layer.GetPrimAtPath(path).specifier == Sdf.SpecifierDef, path
+                continue
             assert layer.GetPrimAtPath(path).specifier == Sdf.SpecifierOver, path
             assert source.GetPrimAtPath(path).IsValid(), path
         for meta in ("upAxis", "metersPerUnit", "kilogramsPerUnit"):
@@ -243,7 +247,8 @@ def test_the_cache_layer_holds_only_overs_at_input_paths(shipped):
         assert (layer.timeCodesPerSecond, layer.startTimeCode, layer.endTimeCode, layer.defaultPrim) == \
             (24, 1, shots.END, "World")
         # dynamic bodies only, with their op order; kinematic and static ones are not repeated
-        bodies = {str(p) for p in specs if layer.GetAttributeAtPath(p.AppendProperty("xformOpOrder"))}
+        bodies = {str(p) for p in specs if layer.GetAttributeAtPath(p.AppendProperty("xformOpOrder"))
+                  and "levelset" not in p.pathString}
         assert bodies == {"/World/Props/Crate", "/World/Props/Ball", "/World/Props/Pill"}
         for p in bodies:
             order = layer.GetAttributeAtPath(f"{p}.xformOpOrder").default
@@ -291,9 +296,10 @@ def test_a_scaled_body_keeps_its_scale_under_a_scaled_parent(tmp_path):
 
 def test_same_shot_same_bytes(tmp_path):
     shot = SCENES / "shot.usda"
-    for out in ("a.usdc", "b.usdc"):
-        assert main(["bake", str(shot), "-o", str(tmp_path / out), "-q"]) == 0
-    assert (tmp_path / "a.usdc").read_bytes() == (tmp_path / "b.usdc").read_bytes()
+    for run in ("a", "b"):  # one name in two folders: the level set's path is relative to it
+        (tmp_path / run).mkdir()
+        assert main(["bake", str(shot), "-o", str(tmp_path / run / "c.usdc"), "-q"]) == 0
+    assert (tmp_path / "a" / "c.usdc").read_bytes() == (tmp_path / "b" / "c.usdc").read_bytes()
 
 
 # --------------------------------------------------------------------------------------------
@@ -566,3 +572,35 @@ def test_bodies_under_a_moving_parent_or_another_body_fall_freely(tmp_path):
                                        err_msg=f"{path} at {frame}")
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "c.usda"))
     assert list(layer.GetAttributeAtPath("/World/Crate/Rider.xformOpOrder").default)[0] == "!resetXformStack!"
+
+
+def test_check_judges_what_simbake_wrote_not_the_inputs_animation(shipped, tmp_path):
+    """`simbake check` on a shot's cache and --shot stage (m/Y-up, cm/Z-up, and over clips):
+    clean, though the pusher is keyed at two time codes only and the units are the input's;
+    a frame missing from what simbake wrote is still caught."""
+    from simbake.check import check_cache
+
+    for name, (cache, shot_stage) in shipped.items():
+        assert check_cache(cache) == [], name
+        assert check_cache(shot_stage) == [], name
+    clipped, stage = tmp_path / "clipped.usdc", tmp_path / "clipped_shot.usda"
+    assert main(["bake", str(SCENES / "shot.usda"), "-o", str(clipped), "--shot", str(stage),
+                 "--clips", "10", "-q"]) == 0
+    assert check_cache(stage) == []
+    assert main(["check", str(stage)]) == 0
+    # one of simbake's own samples gone: reported
+    cache, _ = shipped["shot"]
+    broken = tmp_path / "broken.usda"
+    layer = Sdf.Layer.OpenAsAnonymous(str(cache))
+    layer.EraseTimeSample("/World/Props/Ball.xformOp:translate", 5.0)
+    layer.Export(str(broken))
+    import shutil
+
+    shutil.copytree(cache.with_name("shot.cache.vdb"), tmp_path / "shot.cache.vdb")  # the level set it names
+    stage_layer = Sdf.Layer.CreateNew(str(tmp_path / "broken_shot.usda"))
+    stage_layer.TransferContent(Sdf.Layer.FindOrOpen(str(shipped["shot"][1])))
+    stage_layer.subLayerPaths[0] = "./broken.usda"
+    stage_layer.subLayerPaths[1] = str(SCENES / "shot.usda")
+    stage_layer.Save()
+    problems = check_cache(tmp_path / "broken_shot.usda")
+    assert len(problems) == 1 and "/World/Props/Ball.xformOp:translate: 1 frame(s) without a time sample, first 5" in problems[0]
