@@ -38,7 +38,7 @@ import numpy as np
 from pxr import Gf, Sdf, Vt
 
 from .errors import SceneError, SimulationError
-from .files import write_atomically
+from .files import commit, write_atomically
 from .usd_writer import FORMATS, StreamingWriter, _to_usd, _merge, _remove
 
 __all__ = ["ShotLayerWriter", "write_shot_stage"]
@@ -355,7 +355,7 @@ class ShotLayerWriter(StreamingWriter):
                     raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
                 final = self._tmp_text
             self._layer = None
-            os.replace(final, self.path)
+            commit(Path(final), Path(self.path))  # fsync, then rename
             if final != self._tmp:
                 _remove(self._tmp)
         except BaseException:
