@@ -7,6 +7,18 @@ point's barycentric coordinates, instead of the core's signed volumes). A crossi
 when the edge's two ends lie on opposite sides of the plane by more than round-off (1e-9 of
 the longest edge of the pair) and the crossing point lies inside the triangle by as much.
 
+The same bakes are checked, at every frame and again apart from the core, for what a render
+shows besides layers through layers:
+- strain: the largest edge strain |l| / L - 1 (L from the first frame, the rest shape) within
+  the cloth's strain limit + 1% of it (the QA's warning threshold);
+- cloth inside bodies: each cloth edge sampled at its ends and eighths, against each
+  analytic body's exact distance (box and sphere, at the body's pose read from the cache): no
+  sample deeper than 0.5 mm past the surface (half a pixel of a 2 m shot at 1080p; the
+  cloth's thickness is not counted). Mesh bodies (cloth_demo's ring) are left to the QA,
+  which measures them through their level sets;
+- body edges through the cloth: each box's 12 edges against every cloth triangle, with the
+  same crossing predicate as for the layers: none.
+
 The scenes are baked for their first 2 s (49 frames at 24 fps): the drops, impacts and folds
 all happen there, and the whole set then bakes in a few minutes on this machine class.
 """
@@ -24,6 +36,21 @@ from conftest import REPO
 CLOTH_SCENES = ["drape", "flag", "tablecloth", "cape_on_mover", "cloth_demo", "heap", "towel_on_rod"]
 FRAMES = 49
 ROUND_OFF = 1e-9
+STRAIN_SLACK = 0.01      # of the strain limit (the QA's warning threshold)
+DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
+# (scene, check) pairs that fail today, each a limitation in the README: the test then
+# reports them as an expected failure (with the frames and figures) instead of passing;
+# layers through layers are never excused
+KNOWN_GAPS = {
+    ("tablecloth", "strain"),     # up to 10.3% over the table's edge (frames 7-17)
+    ("tablecloth", "through"),    # the table's edges through 3-6 cloth triangles (frames 7-19)
+    ("cape_on_mover", "strain"),  # up to 10.4% as the mover turns (frames 8-11, 26-27)
+    ("cape_on_mover", "through"), # the mover's edges through 3-6 cloth triangles (every frame from 8)
+    ("cloth_demo", "strain"),     # up to 10.4% as bodies land on the cloth (frames 37-46)
+    ("cloth_demo", "inside"),     # up to 12.7 mm into a sphere (body2) as it lands (frames 26-33)
+    ("cloth_demo", "through"),    # box edges through 7-10 cloth triangles once they rest on it
+    ("heap", "strain"),           # up to 11.1% as the pile lands (frames 17-21)
+}
 
 
 def candidate_pairs(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -46,29 +73,35 @@ def candidate_pairs(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return pairs
 
 
+def segments_through(p: np.ndarray, q: np.ndarray, B: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Does segment (p[k], q[k]) cross triangle B[k] (corners (k, 3, 3))? Strictly: its ends on
+    opposite sides of the plane by more than ROUND_OFF * scale[k], the crossing point inside
+    the triangle by as much (barycentric coordinates)."""
+    n = np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
+    n_len = np.linalg.norm(n, axis=1)
+    dp = np.einsum("ij,ij->i", n, p - B[:, 0]) / np.where(n_len > 0, n_len, 1)
+    dq = np.einsum("ij,ij->i", n, q - B[:, 0]) / np.where(n_len > 0, n_len, 1)
+    tol = ROUND_OFF * scale
+    crosses = ((dp > tol) & (dq < -tol)) | ((dp < -tol) & (dq > tol))
+    x = p + (q - p) * (dp / np.where(dp != dq, dp - dq, 1))[:, None]
+    v0, v1, v2 = B[:, 1] - B[:, 0], B[:, 2] - B[:, 0], x - B[:, 0]
+    d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
+    d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
+    den = np.where(d00 * d11 - d01 * d01 != 0, d00 * d11 - d01 * d01, 1)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    inside = (v > ROUND_OFF) & (w > ROUND_OFF) & (v + w < 1 - ROUND_OFF)
+    return crosses & inside & (n_len > 0)
+
+
 def edges_through(points: np.ndarray, triangles: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """For pairs (a[k], b[k]) of triangles: does an edge of triangle a cross triangle b?"""
     A, B = points[triangles[a]], points[triangles[b]]  # (k, 3, 3)
     edge = np.max(np.linalg.norm(np.concatenate([A - np.roll(A, 1, axis=1), B - np.roll(B, 1, axis=1)], axis=1),
                                  axis=2), axis=1)
-    n = np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0])
-    n_len = np.linalg.norm(n, axis=1)
     hit = np.zeros(len(a), dtype=bool)
     for e in range(3):
-        p, q = A[:, e], A[:, (e + 1) % 3]
-        dp = np.einsum("ij,ij->i", n, p - B[:, 0]) / np.where(n_len > 0, n_len, 1)
-        dq = np.einsum("ij,ij->i", n, q - B[:, 0]) / np.where(n_len > 0, n_len, 1)
-        tol = ROUND_OFF * edge
-        crosses = ((dp > tol) & (dq < -tol)) | ((dp < -tol) & (dq > tol))
-        x = p + (q - p) * (dp / np.where(dp != dq, dp - dq, 1))[:, None]
-        v0, v1, v2 = B[:, 1] - B[:, 0], B[:, 2] - B[:, 0], x - B[:, 0]
-        d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
-        d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
-        den = np.where(d00 * d11 - d01 * d01 != 0, d00 * d11 - d01 * d01, 1)
-        v = (d11 * d20 - d01 * d21) / den
-        w = (d00 * d21 - d01 * d20) / den
-        inside = (v > ROUND_OFF) & (w > ROUND_OFF) & (v + w < 1 - ROUND_OFF)
-        hit |= crosses & inside & (n_len > 0)
+        hit |= segments_through(A[:, e], A[:, (e + 1) % 3], B, edge)
     return hit
 
 
@@ -78,6 +111,88 @@ def crossing_count(points: np.ndarray, triangles: np.ndarray) -> int:
         return 0
     i, j = pairs[:, 0], pairs[:, 1]
     return int((edges_through(points, triangles, i, j) | edges_through(points, triangles, j, i)).sum())
+
+
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """The unique edges (i < j) of a triangle mesh."""
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    return np.unique(np.sort(e, axis=1), axis=0)
+
+
+def largest_strain(points: np.ndarray, edges: np.ndarray, rest: np.ndarray) -> float:
+    return float((np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1) / rest - 1).max())
+
+
+def analytic_distance(shape, p: np.ndarray) -> np.ndarray:
+    """Signed distance (negative inside) of body-space points p (k, 3) to a box or sphere."""
+    if shape.kind == "sphere":
+        return np.linalg.norm(p, axis=1) - shape.radius
+    q = np.abs(p) - 0.5 * np.asarray(shape.size)
+    return np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(axis=1), 0)
+
+
+def edge_samples(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Each edge's ends and eighths, (9 nedge, 3)."""
+    s = np.linspace(0, 1, 9)[:, None, None]
+    return ((1 - s) * points[edges[:, 0]] + s * points[edges[:, 1]]).reshape(-1, 3)
+
+
+def box_edges(size) -> np.ndarray:
+    """The 12 edges of a box centred at the origin, (12, 2, 3)."""
+    h = 0.5 * np.asarray(size)
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * h
+    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+    return np.array([[corners[a], corners[b]] for a, b in pairs])
+
+
+def transform(matrix: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Points p (k, 3) by a USD (row-vector) 4x4 matrix."""
+    return p @ matrix[:3, :3] + matrix[3, :3]
+
+
+def segments_through_mesh(segments: np.ndarray, points: np.ndarray, triangles: np.ndarray) -> int:
+    """How many (segment, triangle) pairs cross, segments (k, 2, 3); boxes first."""
+    corners = points[triangles]
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    count = 0
+    for p, q in segments:
+        near = np.nonzero(np.all((lo <= np.maximum(p, q)) & (np.minimum(p, q) <= hi), axis=1))[0]
+        if len(near) == 0:
+            continue
+        B = corners[near]
+        scale = np.full(len(near), np.linalg.norm(q - p))
+        count += int(segments_through(np.tile(p, (len(near), 1)), np.tile(q, (len(near), 1)), B, scale).sum())
+    return count
+
+
+def test_the_body_checks_find_what_they_look_for():
+    # a flat 1 m sheet at y = 0: a box with a corner 1 cm through it near the middle, a sphere 2 mm
+    # into it from below, and the sheet stretched 5% one way
+    from simbake.assets import grid_mesh
+    from simbake.scene import Shape
+
+    points, triangles = grid_mesh((1.0, 1.0), (11, 11))
+    edges = mesh_edges(triangles)
+    rest = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
+    assert abs(largest_strain(points, edges, rest)) < 1e-12
+    stretched = points * np.array([1.05, 1.0, 1.0])
+    assert abs(largest_strain(stretched, edges, rest) - 0.05) < 1e-12
+    # a 10 cm box turned so that a corner points down, its corner at y = -0.01 under (0.03, 0.04)
+    tilt = np.arccos(1 / np.sqrt(3))
+    axis = np.array([1.0, 0.0, -1.0]) / np.sqrt(2)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + np.sin(tilt) * K + (1 - np.cos(tilt)) * K @ K   # takes (1, 1, 1)/sqrt(3) to +y
+    segs = box_edges((0.1, 0.1, 0.1)) @ R.T
+    segs += np.array([0.03, -0.01, 0.04]) - segs.reshape(-1, 3)[np.argmin(segs.reshape(-1, 3)[:, 1])]
+    assert segments_through_mesh(segs, points, triangles) == 3   # the corner's three edges
+    segs += np.array([0.0, -0.2, 0.0])
+    assert segments_through_mesh(segs, points, triangles) == 0   # all of it below the sheet
+    sphere = Shape(kind="sphere", radius=0.2)
+    depth = -analytic_distance(sphere, edge_samples(points, edges) - np.array([0.0, -0.198, 0.0])).min()
+    assert abs(depth - 0.002) < 1e-12
+    box = Shape(kind="box", size=(0.4, 0.4, 0.4))
+    assert abs(analytic_distance(box, np.array([[0.0, 0.19, 0.0], [0.3, 0.3, 0.2]]))
+               - [-0.01, np.sqrt(0.02)]).max() < 1e-12
 
 
 def test_the_check_finds_crossings():
@@ -98,20 +213,58 @@ def test_the_check_finds_crossings():
 
 
 @pytest.mark.parametrize("name", CLOTH_SCENES)
-def test_shipped_cloth_never_passes_through_itself(name, tmp_path):
+def test_shipped_cloth_is_render_ready(name, tmp_path):
     from pxr import Usd, UsdGeom
 
     scene = simbake.load_scene(REPO / "assets" / "scenes" / f"{name}.toml")
     scene = dataclasses.replace(scene, end_frame=min(scene.end_frame, scene.start_frame + FRAMES - 1))
     stats = simbake.bake(scene, tmp_path / f"{name}.usdc")
     stage = Usd.Stage.Open(str(stats.output))
-    worst = {}
+    frames = range(scene.start_frame, scene.end_frame + 1)
+    # the analytic bodies' poses at every frame
+    bodies = [b for b in scene.bodies if b.shape.kind in ("box", "sphere")]
+    poses = {b.name: [np.array(UsdGeom.Xformable(stage.GetPrimAtPath(f"/World/{b.name}"))
+                               .ComputeLocalToWorldTransform(f)) for f in frames] for b in bodies}
+    crossings, strains, inside, through = {}, {}, {}, {}
     for cloth in scene.cloths:
         mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/{cloth.name}"))
         triangles = np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
-        for frame in range(scene.start_frame, scene.end_frame + 1):
+        edges = mesh_edges(triangles)
+        first = np.asarray(mesh.GetPointsAttr().Get(scene.start_frame), dtype=np.float64)
+        rest = np.linalg.norm(first[edges[:, 1]] - first[edges[:, 0]], axis=1)
+        for i, frame in enumerate(frames):
             points = np.asarray(mesh.GetPointsAttr().Get(frame), dtype=np.float64)
+            # layers through layers
             count = crossing_count(points, triangles)
             if count:
-                worst[(cloth.name, frame)] = count
-    assert not worst, f"crossing triangle pairs at (cloth, frame): {worst}"
+                crossings[(cloth.name, frame)] = count
+            # strain within the limit
+            strain = largest_strain(points, edges, rest)
+            if cloth.strain_limit > 0 and strain > cloth.strain_limit * (1 + STRAIN_SLACK):
+                strains[(cloth.name, frame)] = round(strain, 5)
+            samples = edge_samples(points, edges)
+            for body in bodies:
+                matrix = poses[body.name][i]
+                # cloth edges inside the body
+                depth = -analytic_distance(body.shape, transform(np.linalg.inv(matrix), samples)).min()
+                if depth > DEEPEST_INSIDE:
+                    inside[(cloth.name, body.name, frame)] = round(1000 * depth, 2)
+                # the body's edges through the cloth
+                if body.shape.kind == "box":
+                    segments = transform(matrix, box_edges(body.shape.size).reshape(-1, 3)).reshape(-1, 2, 3)
+                    count = segments_through_mesh(segments, points, triangles)
+                    if count:
+                        through[(cloth.name, body.name, frame)] = count
+    assert not crossings, f"crossing triangle pairs at (cloth, frame): {crossings}"
+    failed = {
+        "strain": (strains, f"strain over the limit + {STRAIN_SLACK:.0%} of it at (cloth, frame)"),
+        "inside": (inside, "cloth edges deeper than 0.5 mm in a body at (cloth, body, frame), mm"),
+        "through": (through, "body edges through cloth triangles at (cloth, body, frame)"),
+    }
+    known = [f"{message}: {found}" for check, (found, message) in failed.items()
+             if found and (name, check) in KNOWN_GAPS]
+    unexpected = [f"{check}: {message}: {found}" for check, (found, message) in failed.items()
+                  if found and (name, check) not in KNOWN_GAPS]
+    assert not unexpected, "; ".join(unexpected)
+    if known:
+        pytest.xfail("known gap (README, limitations): " + "; ".join(known))
