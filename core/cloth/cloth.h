@@ -30,7 +30,7 @@ class Preconditioner; // cloth/multigrid.h: z = P^-1 r for the implicit system's
 enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
 enum class ClothIntegrator { kExplicit, kImplicit };
-// the implicit solve's preconditioner: automatic = multigrid for all but tiny cloths
+// the implicit solve's preconditioner: automatic = block-Jacobi (cloth.cpp says why)
 enum class ClothPreconditioner { kAutomatic, kBlockJacobi, kMultigrid };
 
 struct ClothMaterial {
