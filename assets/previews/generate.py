@@ -1,6 +1,8 @@
 """Bakes every shipped scene and writes a strip of four preview frames for each.
 
-    .venv/bin/python assets/previews/generate.py [SCENE ...]   # default: every assets/scenes/*.toml
+    .venv/bin/python assets/previews/generate.py [SCENE ...]   # default: every assets/scenes/*.toml and *.usda
+
+A USD shot's strip shows its --shot stage (the cache layer over the shot), as a TD opens it.
 
 Each strip, assets/previews/<scene>.png, is four evenly spaced frames at 320x180 side by
 side (simbake.preview), quantized to 256 colours to stay small; the README's scene table
@@ -26,10 +28,11 @@ def strip(scene_path: Path, work: Path) -> Path:
     from simbake.preview import Preview, contact_sheet, parse_frames
 
     scene = simbake.load_scene(scene_path)
-    stats = simbake.bake(scene, work / f"{scene_path.stem}.usdc")
+    shot = work / f"{scene_path.stem}.shot.usda" if scene.shot is not None else None
+    stats = simbake.bake(scene, work / f"{scene_path.stem}.usdc", shot=shot)
     for line in stats.warnings:
         print(f"  {scene_path.name}: {line}")
-    preview = Preview(stats.output, SIZE)
+    preview = Preview(shot or stats.output, SIZE)
     try:
         frames = parse_frames(None, preview.start, preview.end, FRAMES)
         images = [image for _, image in preview.frames(frames)]
@@ -43,7 +46,7 @@ def strip(scene_path: Path, work: Path) -> Path:
 
 
 def main(names: list[str]) -> None:
-    paths = [Path(n) for n in names] if names else sorted(SCENES.glob("*.toml"))
+    paths = [Path(n) for n in names] if names else sorted([*SCENES.glob("*.toml"), *SCENES.glob("*.usda")])
     with tempfile.TemporaryDirectory() as work:
         for path in paths:
             strip(path.resolve(), Path(work))
