@@ -38,7 +38,7 @@ import numpy as np
 from pxr import Gf, Sdf, Vt
 
 from .errors import SceneError, SimulationError
-from .files import commit, write_atomically
+from .files import write_atomically
 from .usd_writer import FORMATS, StreamingWriter, _to_usd, _merge, _remove
 
 __all__ = ["ShotLayerWriter", "write_shot_stage"]
@@ -348,16 +348,7 @@ class ShotLayerWriter(StreamingWriter):
             self.abort()
             raise RuntimeError(f"{self.path}: frames missing (next expected {self._next_frame}); nothing saved")
         try:
-            self._save()
-            final = self._tmp
-            if self._tmp_text is not None:
-                if not self._layer.Export(str(self._tmp_text)):
-                    raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
-                final = self._tmp_text
-            self._layer = None
-            commit(Path(final), Path(self.path))  # fsync, then rename
-            if final != self._tmp:
-                _remove(self._tmp)
+            self._commit_layer()
         except BaseException:
             self.abort()
             raise

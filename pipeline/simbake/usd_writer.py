@@ -277,6 +277,21 @@ class StreamingWriter:
         else:
             self.abort()
 
+    def _commit_layer(self) -> None:
+        """Save the layer to its temp file (and export it as text for .usda), then move it
+        into place: fsync, then rename. The layer is released first (crate files are mapped)."""
+        if not self._layer.Save():
+            raise OSError(f"{self._tmp}: saving the USD layer failed")
+        final = self._tmp
+        if self._tmp_text is not None:
+            if not self._layer.Export(str(self._tmp_text)):
+                raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
+            final = self._tmp_text
+        self._layer = None
+        commit(Path(final), Path(self.path))
+        if final != self._tmp:
+            _remove(self._tmp)
+
 
 class CacheWriter(StreamingWriter):
     """Streams a simbake USD cache (version 1) to ``path``; see the module docstring.
@@ -636,16 +651,7 @@ class CacheWriter(StreamingWriter):
             raise RuntimeError(f"{self.path}: {missing} frame(s) not written (next expected "
                                f"{self._next_frame}, end {self.end_frame}); nothing saved")
         try:
-            self.flush()
-            final = self._tmp
-            if self._tmp_text is not None:
-                if not self._layer.Export(str(self._tmp_text)):
-                    raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
-                final = self._tmp_text
-            self._layer = None  # release the crate file before it is renamed or removed
-            commit(final, self.path)  # fsync, then rename
-            if final != self._tmp:
-                _remove(self._tmp)
+            self._commit_layer()
         except BaseException:
             self.abort()
             raise
