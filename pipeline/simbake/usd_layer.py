@@ -341,20 +341,6 @@ class ShotLayerWriter(StreamingWriter):
         if not self._layer.Save():
             raise OSError(f"{self._tmp}: saving the USD layer failed")
 
-    def close(self) -> Path:
-        if self._done:
-            return self.path
-        if self._next_frame != self.end_frame + 1:
-            self.abort()
-            raise RuntimeError(f"{self.path}: frames missing (next expected {self._next_frame}); nothing saved")
-        try:
-            self._commit_layer()
-        except BaseException:
-            self.abort()
-            raise
-        self._done = True
-        return self.path
-
     def abort(self) -> None:
         if self._done:
             return

@@ -266,7 +266,9 @@ _counter = itertools.count()
 
 class StreamingWriter:
     """A writer used as a context manager: close() when the block ends normally, abort()
-    (nothing written) when it raises. Subclasses define close() and abort()."""
+    (nothing written) when it raises. Subclasses define abort(); a writer of one layer
+    (``_layer``, its temp files, frames start_frame..end_frame) finishes with this close(),
+    others define their own."""
 
     def __enter__(self):
         return self
@@ -276,6 +278,32 @@ class StreamingWriter:
             self.close()
         else:
             self.abort()
+
+    def close(self) -> Path:
+        """Finish: final save, then move the file into place. Returns the path written.
+
+        Raises ``RuntimeError`` (and removes the temp file) if not every frame was written.
+        """
+        if self._done:
+            return self.path
+        if self._layer is None:
+            raise RuntimeError(f"{self.path}: writer was aborted")
+        if self._next_frame != self.end_frame + 1:
+            missing = self.end_frame + 1 - self._next_frame
+            self.abort()
+            raise RuntimeError(f"{self.path}: {missing} frame(s) not written (next expected "
+                               f"{self._next_frame}, end {self.end_frame}); nothing saved")
+        try:
+            self._commit_layer()
+        except BaseException:
+            self.abort()
+            raise
+        self._done = True
+        self._committed()
+        return self.path
+
+    def _committed(self) -> None:
+        """Called once the file is in place (nothing more to do by default)."""
 
     def _commit_layer(self) -> None:
         """Save the layer to its temp file (and export it as text for .usda), then move it
@@ -636,28 +664,8 @@ class CacheWriter(StreamingWriter):
         self._since_flush = 0
         self._pending_bytes = 0
 
-    def close(self) -> Path:
-        """Finish: final save, then move the file into place. Returns the path written.
-
-        Raises ``RuntimeError`` (and removes the temp file) if not every frame was written.
-        """
-        if self._done:
-            return self.path
-        if self._layer is None:
-            raise RuntimeError(f"{self.path}: writer was aborted")
-        if self._next_frame != self.end_frame + 1:
-            missing = self.end_frame + 1 - self._next_frame
-            self.abort()
-            raise RuntimeError(f"{self.path}: {missing} frame(s) not written (next expected "
-                               f"{self._next_frame}, end {self.end_frame}); nothing saved")
-        try:
-            self._commit_layer()
-        except BaseException:
-            self.abort()
-            raise
-        self._done = True
-        self._finalizer.detach()
-        return self.path
+    def _committed(self) -> None:
+        self._finalizer.detach()  # the temp files are gone: nothing left to clean up
 
     def abort(self) -> None:
         """Discard everything: remove the temp file(s); ``path`` is left untouched."""
