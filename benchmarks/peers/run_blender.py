@@ -138,16 +138,20 @@ def main() -> None:
     def centres():
         return scenes.positions_from_zup([tuple(o.matrix_world.translation) for o in objects])
 
+    def turns():   # the rotation of each world matrix without its scale, [w, x, y, z]
+        return scenes.orientations_from_zup([tuple(o.matrix_world.decompose()[1]) for o in objects])
+
     record = set(scene.recorded_frames())
-    positions = [centres()]
+    positions, orientations = [centres()], [turns()]
     clock = scenes.StepClock()
     for frame in range(1, scene.frames + 1):
         with clock:
             sc.frame_set(frame + 1)
         if frame in record:
             positions.append(centres())
+            orientations.append(turns())
     print(json.dumps(scenes.result("blender", bpy.app.version_string, scene, clock,
-                                   np.array(positions), settings)))
+                                   np.array(positions), settings, None, np.array(orientations))))
 
 
 if __name__ == "__main__":

@@ -89,8 +89,11 @@ def main() -> None:
     def centres():
         return scenes.positions_from_zup(data.xpos[1:].copy())
 
+    def turns():
+        return scenes.orientations_from_zup(data.xquat[1:].copy())
+
     record = set(scene.recorded_frames())
-    positions = [centres()]
+    positions, orientations = [centres()], [turns()]
     clock = scenes.StepClock()
     max_contacts = 0
     for frame in range(1, scene.frames + 1):
@@ -99,11 +102,13 @@ def main() -> None:
         max_contacts = max(max_contacts, int(data.ncon))
         if frame in record:
             positions.append(centres())
+            orientations.append(turns())
     warnings = {str(mujoco.mjtWarning(i)).split(".")[-1]: int(w.number)
                 for i, w in enumerate(data.warning) if w.number}
     print(json.dumps(scenes.result("mujoco", mujoco.__version__, scene, clock,
                                    np.array(positions), settings,
-                                   {"max_contacts_at_frame_ends": max_contacts, "mujoco_warnings": warnings})))
+                                   {"max_contacts_at_frame_ends": max_contacts, "mujoco_warnings": warnings},
+                                   np.array(orientations))))
 
 
 if __name__ == "__main__":

@@ -88,8 +88,12 @@ def main() -> None:
         return scenes.positions_from_zup(
             [p.getBasePositionAndOrientation(i, physicsClientId=client)[0] for i in ids])
 
+    def turns():   # PyBullet's quaternions are [x, y, z, w]
+        xyzw = np.array([p.getBasePositionAndOrientation(i, physicsClientId=client)[1] for i in ids])
+        return scenes.orientations_from_zup(xyzw[:, [3, 0, 1, 2]])
+
     record = set(scene.recorded_frames())
-    positions = [centres()]
+    positions, orientations = [centres()], [turns()]
     clock = scenes.StepClock()
     for frame in range(1, scene.frames + 1):
         with clock:
@@ -97,6 +101,7 @@ def main() -> None:
                 p.stepSimulation(physicsClientId=client)
         if frame in record:
             positions.append(centres())
+            orientations.append(turns())
     version = "3.2.7 (API %d)" % p.getAPIVersion(physicsClientId=client)
     try:
         from importlib.metadata import version as dist_version
@@ -105,7 +110,7 @@ def main() -> None:
         pass
     p.disconnect(client)
     print(json.dumps(scenes.result("pybullet", version, scene, clock,
-                                   np.array(positions), settings)))
+                                   np.array(positions), settings, None, np.array(orientations))))
 
 
 if __name__ == "__main__":

@@ -30,8 +30,9 @@ BOX_SUBDIVISIONS = 4
 SPHERE_SUBDIVISIONS = 8
 
 
-def build_world(scene: scenes.Scene) -> "_core.World":
-    world = _core.World(gravity=np.array(scene.gravity, dtype=float))
+def build_world(scene: scenes.Scene, **settings) -> "_core.World":
+    """The scene's world, with World settings (e.g. threads) on top of the defaults."""
+    world = _core.World(gravity=np.array(scene.gravity, dtype=float), **settings)
     world.set_ground(scene.ground_height, scenes.per_object(scene.mu, "geometric"), 0.0)
     shapes = {}   # one level set and sample set per distinct shape (the pile shares one)
     for b in scene.bodies:
@@ -56,14 +57,16 @@ def main() -> None:
     scene = scenes.build(args.scene, args.seconds)
     world = build_world(scene)
     record = set(scene.recorded_frames())
-    positions = [world.mesh_poses()[0].copy()]            # box/sphere meshes are centred
+    positions, orientations = [world.mesh_poses()[0].copy()], [world.mesh_poses()[1].copy()]  # centred meshes
     clock = scenes.StepClock()
     substeps = []
     for frame in range(1, scene.frames + 1):
         with clock:
             substeps.append(world.step_frame(1.0 / scenes.FPS, 0))
         if frame in record:
-            positions.append(world.mesh_poses()[0].copy())
+            translation, orientation = world.mesh_poses()
+            positions.append(translation.copy())
+            orientations.append(orientation.copy())
     stats = world.statistics()
     profile = {k: float(v) for k, v in world.profile().items()}
     settings = {
@@ -85,7 +88,7 @@ def main() -> None:
              "statistics": {k: (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
                             for k, v in stats.items()}}
     print(json.dumps(scenes.result("simbake", simbake.__version__, scene, clock,
-                                   np.array(positions), settings, extra)))
+                                   np.array(positions), settings, extra, np.array(orientations))))
 
 
 if __name__ == "__main__":

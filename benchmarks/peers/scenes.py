@@ -99,7 +99,7 @@ def _quat_axis_angle(axis, angle):
     return (math.cos(0.5 * angle), axis[0] * s, axis[1] * s, axis[2] * s)
 
 
-def _pile(nx, ny, nz, seconds, name):
+def _pile(nx, ny, nz, seconds, name, max_tilt_deg=PILE_MAX_TILT_DEG):
     rng = random.Random(PILE_SEED)
     size, spacing, bottom = 0.5, 0.8, 0.5   # the lowest boxes' bottoms start 0.5 m up
     bodies = []
@@ -111,14 +111,15 @@ def _pile(nx, ny, nz, seconds, name):
                 phi = rng.uniform(0.0, 2.0 * math.pi)
                 r = math.sqrt(max(0.0, 1.0 - z * z))
                 axis = (r * math.cos(phi), r * math.sin(phi), z)
-                angle = math.radians(rng.uniform(0.0, PILE_MAX_TILT_DEG))
+                angle = math.radians(rng.uniform(0.0, max_tilt_deg))
                 position = ((i - 0.5 * (nx - 1)) * spacing,
                             bottom + 0.5 * size + j * spacing,
                             (k - 0.5 * (nz - 1)) * spacing)
                 bodies.append(Body("box", (size, size, size), position, _quat_axis_angle(axis, angle)))
     n = nx * ny * nz
-    return Scene(name, f"pile: {n} boxes 0.5 m, {nx}x{ny}x{nz} grid (0.8 m), tilted <= 20 deg, mu 0.5",
-                 bodies, seconds or 5.0, mu=0.5, record="ends")
+    tilt = f"tilted <= {max_tilt_deg:g} deg" if max_tilt_deg > 0.0 else "aligned"
+    return Scene(name, f"pile: {n} boxes 0.5 m, {nx}x{ny}x{nz} grid (0.8 m), {tilt}, mu 0.5",
+                 bodies, seconds or 5.0, mu=0.5)
 
 
 def _pyramid(seconds, rows=15):
@@ -150,6 +151,10 @@ SCENES = {
     "tower": lambda s=None: _tower(s),
     "pile": lambda s=None: _pile(10, 10, 10, s, "pile"),
     "pile216": lambda s=None: _pile(6, 6, 6, s, "pile216"),
+    "pile_aligned": lambda s=None: _pile(10, 10, 10, s, "pile_aligned", max_tilt_deg=0.0),
+    # the scaling series: the same boxes and spacing on wider grids
+    "pile4000": lambda s=None: _pile(20, 10, 20, s, "pile4000"),
+    "pile10000": lambda s=None: _pile(25, 10, 40, s, "pile10000"),
     "pyramid": lambda s=None: _pyramid(s),
     "drop": lambda s=None: _drop(s),
     "incline_slide": lambda s=None: _incline(0.5, s, "incline_slide"),
@@ -213,6 +218,14 @@ def quat_from_zup(q):
     return quat_multiply((w, -x, -y, -z), q)
 
 
+def orientations_from_zup(q: np.ndarray) -> np.ndarray:
+    """(..., 4) Z-up orientations [w, x, y, z] -> Y up (quat_from_zup on each)."""
+    q = np.asarray(q, dtype=float)
+    s = math.sqrt(0.5)   # conj(_Q_YUP_TO_ZUP) (x) q, written out
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([s * (w + x), s * (x - w), s * (y + z), s * (z - y)], axis=-1)
+
+
 def positions_from_zup(p: np.ndarray) -> np.ndarray:
     """(..., 3) Z-up positions -> Y up."""
     p = np.asarray(p, dtype=float)
@@ -223,6 +236,91 @@ def positions_from_zup(p: np.ndarray) -> np.ndarray:
 # measurements (shared by every engine)
 
 
+def quaternion_matrices(q: np.ndarray) -> np.ndarray:
+    """(..., 4) unit quaternions [w, x, y, z] -> (..., 3, 3) rotation matrices."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)], axis=-2)
+
+
+def close_pairs(centres: np.ndarray, reach: float) -> np.ndarray:
+    """(k, 2) pairs i < j of points closer than `reach`, found through a grid of cells of
+    that size (each cell against itself and its 13 forward neighbours), so 10,000 bodies
+    cost a few thousand pair tests, not 5e7."""
+    cells = np.floor(np.asarray(centres) / reach).astype(np.int64)
+    cells -= cells.min(axis=0)
+    span = cells.max(axis=0) + 3
+    keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    offsets = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)
+               if (dx, dy, dz) > (0, 0, 0)]
+    firsts, seconds = [], []
+    for dx, dy, dz in [(0, 0, 0)] + offsets:
+        target = keys + (dx * span[1] + dy) * span[2] + dz
+        lo = np.searchsorted(sorted_keys, target, side="left")
+        hi = np.searchsorted(sorted_keys, target, side="right")
+        counts = hi - lo
+        i = np.repeat(np.arange(len(keys)), counts)
+        j = order[np.repeat(lo, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)]
+        keep = i < j if (dx, dy, dz) == (0, 0, 0) else np.ones(len(i), bool)
+        firsts.append(i[keep])
+        seconds.append(j[keep])
+    i, j = np.concatenate(firsts), np.concatenate(seconds)
+    near = np.linalg.norm(centres[i] - centres[j], axis=-1) < reach
+    pairs = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=-1)[near]
+    return pairs
+
+
+def box_overlap(ca, Ra, ha, cb, Rb, hb) -> np.ndarray:
+    """Penetration depth of pairs of boxes (centres (k, 3), rotations (k, 3, 3) whose columns
+    are the box axes, half sizes (k, 3)): the smallest overlap of their projections on the
+    15 separating axes (3 face normals each, 9 edge-edge cross products), which for convex
+    polyhedra is the shortest translation that separates them; 0 when apart."""
+    axes = [Ra[:, :, i] for i in range(3)] + [Rb[:, :, i] for i in range(3)]
+    for i in range(3):
+        for j in range(3):
+            axes.append(np.cross(Ra[:, :, i], Rb[:, :, j]))
+    L = np.stack(axes, axis=1)                                     # (k, 15, 3)
+    length = np.linalg.norm(L, axis=-1)
+    valid = length > 1e-6                                          # parallel edges: no axis
+    L = L / np.where(valid, length, 1.0)[..., None]
+    ra = (np.abs(np.einsum("kaj,kji->kai", L, Ra)) * ha[:, None, :]).sum(-1)
+    rb = (np.abs(np.einsum("kaj,kji->kai", L, Rb)) * hb[:, None, :]).sum(-1)
+    distance = np.abs(np.einsum("kaj,kj->ka", L, cb - ca))
+    overlap = np.where(valid, ra + rb - distance, np.inf)
+    return np.maximum(overlap.min(axis=1), 0.0)
+
+
+def box_penetration(scene: Scene, positions: np.ndarray, orientations: np.ndarray) -> dict:
+    """Deepest penetration of box into box and of a box corner into the ground, at every
+    recorded frame, measured from the poses alone (the same code for every engine)."""
+    half = 0.5 * np.array([b.size for b in scene.bodies], dtype=float)     # (n, 3)
+    reach = 2.0 * float(np.linalg.norm(half, axis=-1).max())
+    deepest_pair, deepest_ground, deepest_frame = [], [], []
+    for p, q in zip(np.asarray(positions, float), np.asarray(orientations, float)):
+        R = quaternion_matrices(q)
+        lowest = p[:, 1] - (np.abs(R[:, 1, :]) * half).sum(-1)
+        deepest_ground.append(float(max(0.0, (scene.ground_height - lowest).max())))
+        pairs = close_pairs(p, reach) if len(p) > 1 else np.zeros((0, 2), int)
+        depth = 0.0
+        if len(pairs):
+            i, j = pairs[:, 0], pairs[:, 1]
+            depth = float(box_overlap(p[i], R[i], half[i], p[j], R[j], half[j]).max())
+        deepest_pair.append(depth)
+    frames = scene.recorded_frames()
+    worst = int(np.argmax(np.maximum(deepest_pair, deepest_ground)))
+    return {"penetration_mm": 1000.0 * max(max(deepest_pair), max(deepest_ground)),
+            "penetration_boxes_mm": 1000.0 * max(deepest_pair),
+            "penetration_ground_mm": 1000.0 * max(deepest_ground),
+            "penetration_time": frames[worst] / FPS,
+            "penetration_end_mm": 1000.0 * max(deepest_pair[-1], deepest_ground[-1])}
+
+
 def _parabola_vertex(t, y):
     """Vertex height of the parabola through three points."""
     c = np.polyfit(np.asarray(t, float), np.asarray(y, float), 2)
@@ -231,14 +329,18 @@ def _parabola_vertex(t, y):
     return float(c[2] - c[1] * c[1] / (4.0 * c[0]))
 
 
-def analyze(scene: Scene, positions: np.ndarray) -> dict:
-    """Accuracy of a run from the recorded centres (len(recorded_frames()), n, 3), Y up."""
+def analyze(scene: Scene, positions: np.ndarray, orientations: np.ndarray | None = None) -> dict:
+    """Accuracy of a run from the recorded centres (len(recorded_frames()), n, 3), Y up, and
+    for scenes of boxes from the orientations too ((frames, n, 4), [w, x, y, z], Y up): the
+    deepest penetration at any recorded frame."""
     p = np.asarray(positions, dtype=float)
     frames = scene.recorded_frames()
     t = np.array(frames, dtype=float) / FPS
     out = {"finite": bool(np.isfinite(p).all())}
     if not out["finite"]:
         return out
+    if orientations is not None and all(b.shape == "box" for b in scene.bodies):
+        out.update(box_penetration(scene, p, orientations))
     displacement = np.linalg.norm(p - p[0], axis=-1)            # (frames, n)
     if scene.name in ("tower", "pyramid"):
         out["drift_mm"] = 1000.0 * float(displacement.max())     # largest, any box, any frame
@@ -304,16 +406,22 @@ def analyze(scene: Scene, positions: np.ndarray) -> dict:
     return out
 
 
+def _penetration(accuracy: dict) -> str:
+    if "penetration_mm" not in accuracy:
+        return ""
+    return f", pen {accuracy['penetration_mm']:.3g} mm"
+
+
 def summary(scene_name: str, accuracy: dict) -> str:
     """One short accuracy string for tables and the chart."""
     a = accuracy
     if not a or not a.get("finite", False):
         return "non-finite" if a else "-"
     if scene_name in ("tower", "pyramid"):
-        return f"drift {a['drift_mm']:.3g} mm"
+        return f"drift {a['drift_mm']:.3g} mm" + _penetration(a)
     if scene_name.startswith("pile"):
         flag = "EXPLODED, " if a["exploded"] else ""
-        return f"{flag}vmax {a['max_speed_end']:.2g} m/s, {a['below_ground']} below"
+        return f"{flag}vmax {a['max_speed_end']:.2g} m/s, {a['below_ground']} below" + _penetration(a)
     if scene_name == "drop":
         return f"apex {a['apex_error_pct']:+.1f}%"
     if scene_name == "incline_slide":
@@ -324,7 +432,8 @@ def summary(scene_name: str, accuracy: dict) -> str:
 
 
 def result(engine: str, version: str, scene: Scene, clock: "StepClock",
-           positions: np.ndarray, settings: dict, extra: dict | None = None) -> dict:
+           positions: np.ndarray, settings: dict, extra: dict | None = None,
+           orientations: np.ndarray | None = None) -> dict:
     """The JSON line an engine script prints."""
     sim = scene.frames / FPS
     out = {
@@ -334,7 +443,7 @@ def result(engine: str, version: str, scene: Scene, clock: "StepClock",
         "step_cpu_seconds": clock.cpu,     # process CPU time: above wall = more than one thread
         "wall_per_simulated_second": clock.total / sim if sim > 0 else None,
         "wall_per_simulated_second_by_second": clock.by_second(),
-        "accuracy": analyze(scene, positions),
+        "accuracy": analyze(scene, positions, orientations),
         "settings": settings,
     }
     out["summary"] = summary(scene.name, out["accuracy"])
