@@ -1,0 +1,48 @@
+// Contact between two boxes, exactly: the separating-axis test and clipping.
+//
+// Sample points on a box find its faces against another body but miss an edge crossing an
+// edge between samples: two 0.5 m boxes with samples 0.125 m apart can cross edges 28 mm deep
+// while no sample is inside (measured on the 216-box pile). For two boxes the contact can be
+// found exactly, as game engines do (Gottschalk, Lin and Manocha 1996 for the 15 separating
+// axes; Ericson, "Real-Time Collision Detection" 2005, 5.2 and 4.4, for the clipping):
+//  - the axis of least overlap among the 15 candidates (3 face normals of each box, 9 cross
+//    products of their edges) is the contact normal and its overlap the depth: for convex
+//    polyhedra that is the shortest translation that separates them;
+//  - a face axis: the reference face is that face, the incident face the other box's face
+//    most opposed to it; the incident face is clipped to the reference face's side planes
+//    and each remaining corner below the reference plane is a contact point (up to 8);
+//  - an edge-edge axis: one point, the closest points of the two edges.
+// Face axes are preferred over edge axes unless an edge axis is clearly shallower (a
+// tolerance), so that a box resting on another keeps a face contact from step to step.
+#pragma once
+
+#include "math/types.h"
+
+#include <array>
+
+namespace simbake {
+
+struct OrientedBox {
+  Vec3 center;     // (m, world)
+  Mat3 rotation;   // columns: the box's axes in world
+  Vec3 half;       // half edge lengths along those axes (m)
+};
+
+struct BoxContactPoint {
+  Vec3 x;          // a point of box a's surface (world, m)
+  double depth;    // how far it is inside box b (m); negative: apart by that much (margin)
+};
+
+struct BoxContact {
+  Vec3 normal = Vec3::Zero();  // unit, world, from box b towards box a
+  double depth = 0.0;          // overlap along the normal (m): the separating-axis depth
+  bool edge_edge = false;      // the normal is a cross product of two edges
+  int count = 0;               // points used
+  std::array<BoxContactPoint, 8> points;
+};
+
+// The contact of box a with box b when they overlap or are apart by less than `margin` (m);
+// false when they are farther apart. Points closer than `margin` outside count (depth < 0).
+bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out);
+
+}  // namespace simbake
