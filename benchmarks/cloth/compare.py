@@ -4,6 +4,7 @@ side with Blender's cloth modifier, Newton's VBD (CPU) and MuJoCo's flex.
 
     python3 benchmarks/cloth/compare.py              # every run below (~40 min on 2 cores)
     python3 benchmarks/cloth/compare.py --quick      # resolutions 17 and 33 only
+    python3 benchmarks/cloth/compare.py --self-collision --fresh   # every engine with self-collision on
     python3 benchmarks/cloth/compare.py --engines simbake --fresh
     python3 benchmarks/cloth/compare.py --report     # tables and plots from the saved runs
     taskset -c 0 python3 benchmarks/cloth/compare.py --engines simbake --resolutions 17 33 65 &
@@ -83,7 +84,15 @@ RUNS_FULL = [
     *[("mujoco", n, [], "default") for n in (17, 33, 65)],
     ("mujoco", 65, ["--steps-per-frame", "8"], "8 steps/frame"),
 ]
-QUICK = [r for r in RUNS_FULL if r[1] in (17, 33)]
+# the drape with every engine's self-collision on (simbake's is on by default), counted for
+# layers through layers by crossings.py at 4 frames a second (drape_spec.Meter)
+SELF = ["--self-collision", "on"]
+RUNS_SELF = [
+    *[("simbake", n, [], "default") for n in (17, 33, 65, 129, 257)],
+    *[("blender", n, SELF, "self-collision") for n in (17, 33, 65, 129)],
+    *[("newton", n, SELF, "self-collision") for n in (17, 33, 65)],
+    *[("mujoco", n, SELF, "self-collision") for n in (17, 33, 65)],
+]
 RINGS = 8
 
 
@@ -149,6 +158,8 @@ def summarize(runs: dict) -> list[dict]:
                 "memory_mib": run["memory_mib"],
                 "max_strain": run["max_strain"],
                 "max_penetration": run["max_penetration"],
+                "self_crossings": run.get("self_crossings"),
+                "self_crossings_time": run.get("self_crossings_time"),
                 "profile_error": {t: profile_error(run, reference, t) for t in ("0.5", "1", "3")},
                 "shape_error_0.5": shape_error(run, reference, "0.5"),
             })
@@ -168,6 +179,13 @@ def fmt(value, digits: int = 3) -> str:
     return f"{value:.{digits}g}"
 
 
+def crossings(row: dict) -> str:
+    count = row.get("self_crossings")
+    if count is None:
+        return "-"
+    return str(count) if not count else f"{count} ({fmt(row['self_crossings_time'], 3)})"
+
+
 def write_markdown(payload: dict, path: Path) -> None:
     lines = [
         "# Cloth benchmark: the drape (`benchmarks/cloth/compare.py`)",
@@ -182,13 +200,17 @@ def write_markdown(payload: dict, path: Path) -> None:
         f"Machine: {payload['machine']['cpu_model']}, load average at the start "
         f"{', '.join(f'{v:.1f}' for v in payload['machine']['load_average'])}; simbake {payload['git']['head']}.",
         "",
-        "| engine | n | setting | CPU s / sim s | wall s / sim s | memory MiB | max strain | max penetration mm | profile error 0.5 / 1 / 3 s (mm) | shape error 0.5 s (mm) |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "Self-crossings: the most crossing pairs of non-adjacent triangles at any counted frame (4 a second",
+        "and the last; `crossings.py`, the same code and triangulation for every engine), and when; '-'",
+        "for runs saved before it was counted.",
+        "",
+        "| engine | n | setting | CPU s / sim s | wall s / sim s | memory MiB | max strain | max penetration mm | self-crossings (at s) | profile error 0.5 / 1 / 3 s (mm) | shape error 0.5 s (mm) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in payload["rows"]:
         label = LABELS["simbake-explicit" if r["label"] == "explicit" else r["engine"]]
         if "error" in r:
-            lines.append(f"| {label} | {r['resolution']} | {r['label']} | {r['error']} | | | | | | |")
+            lines.append(f"| {label} | {r['resolution']} | {r['label']} | {r['error']} | | | | | | | |")
             continue
         pe = r["profile_error"]
         errors = " / ".join(fmt(None if pe[t] is None else 1000 * pe[t], 2) for t in ("0.5", "1", "3"))
@@ -196,7 +218,7 @@ def write_markdown(payload: dict, path: Path) -> None:
         lines.append(
             f"| {label} | {r['resolution']} | {r['label']} | {fmt(r['cpu_per_sim_second'])} | "
             f"{fmt(r['wall_per_sim_second'])} | {fmt(r['memory_mib'], 3)} | "
-            f"{fmt(r['max_strain'], 2)} | {fmt(1000 * r['max_penetration'], 2)} | {errors} | "
+            f"{fmt(r['max_strain'], 2)} | {fmt(1000 * r['max_penetration'], 2)} | {crossings(r)} | {errors} | "
             f"{fmt(None if shape is None else 1000 * shape, 2)} |")
     path.write_text("\n".join(lines) + "\n")
 
@@ -254,6 +276,8 @@ def write_plots(payload: dict) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="resolutions 17 and 33 only")
+    parser.add_argument("--self-collision", action="store_true",
+                        help="the self-collision comparison (RUNS_SELF): every engine's self-collision on")
     parser.add_argument("--engines", nargs="+", choices=list(ENGINES), default=list(ENGINES))
     parser.add_argument("--fresh", action="store_true", help="rerun runs already saved")
     parser.add_argument("--report", action="store_true", help="no runs: report the saved ones")
@@ -269,8 +293,9 @@ def main() -> None:
     runs = {}
     for path in sorted(RESULTS.glob("cloth_runs_*.json")):
         runs.update(json.loads(path.read_text()))
-    plan = [r for r in (QUICK if args.quick else RUNS_FULL)
-            if r[0] in args.engines and (not args.resolutions or r[1] in args.resolutions)]
+    plan = RUNS_SELF if args.self_collision else RUNS_FULL
+    plan = [r for r in plan if r[0] in args.engines and (not args.resolutions or r[1] in args.resolutions)
+            and (not args.quick or r[1] in (17, 33))]
     if not args.report:
         for engine, n, extra, label in plan:
             key = run_key(engine, n, extra)

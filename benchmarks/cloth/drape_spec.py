@@ -10,6 +10,10 @@ Every runner reports, as one JSON line (see `report`):
   (m, past the surface itself: thickness is not subtracted),
 - the largest edge strain |l|/L - 1 over all frames (grid edges, diagonals excluded, so that
   every engine is measured on the same edges whatever its triangulation),
+- layers through layers: crossing pairs of non-adjacent triangles (crossings.py, NumPy alone)
+  every CROSSING_EVERY frames and at the last, the most at any of them and when; every engine's
+  vertices are triangulated as grid() does, so the count is the same code on the same
+  triangles (an engine splitting its quads the other way is measured on ours),
 - the positions, at SHAPE_TIMES, of the 17 x 17 material points common to every resolution
   (resolution 16 k + 1 vertices a side), row-major: point (i, j), i along x and j along z,
   is at index j * 17 + i. compare.py turns these into shape errors against a reference run.
@@ -20,6 +24,8 @@ from __future__ import annotations
 import json
 import resource
 import numpy as np
+
+from crossings import crossing_count
 
 SIZE = 2.0                    # cloth side (m)
 HEIGHT = 1.2                  # cloth plane's height (m), centred over the sphere
@@ -39,6 +45,7 @@ FRAMES = int(round(SECONDS * FPS))
 SHAPE_TIMES = (0.5, 1.0, 3.0) # s
 COMMON = 17                   # common material points a side
 RESOLUTIONS = (17, 33, 65, 129, 257)
+CROSSING_EVERY = 6            # frames between crossing counts (4 a second)
 
 
 def grid(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -80,6 +87,11 @@ class Meter:
         rest = grid(n)[0]
         self.rest = np.linalg.norm(rest[self.edges[:, 1]] - rest[self.edges[:, 0]], axis=1)
         self.common = common_indices(n)
+        self.triangles = grid(n)[1]
+        self.frames = 0
+        self.crossings = 0            # the most crossing triangle pairs at any counted frame
+        self.crossings_time = None    # (s) when first seen at that count
+        self.crossings_counted = 0
         self.penetration = 0.0
         self.strain = 0.0
         self.shapes: dict[str, list] = {}
@@ -93,6 +105,12 @@ class Meter:
         for ts in SHAPE_TIMES:
             if abs(t - ts) < 0.25 / FPS:
                 self.shapes[f"{ts:g}"] = x[self.common].round(6).tolist()
+        if self.frames % CROSSING_EVERY == 0 or abs(t - SECONDS) < 0.25 / FPS:
+            count = crossing_count(x, self.triangles) if np.isfinite(x).all() else -1
+            self.crossings_counted += 1
+            if count > self.crossings or count < 0:
+                self.crossings, self.crossings_time = count, t
+        self.frames += 1
         if not np.isfinite(x).all():
             self.penetration = self.strain = float("inf")
 
@@ -108,5 +126,7 @@ def report(engine: str, n: int, settings: dict, wall: float, meter: Meter, **ext
         "wall_per_sim_second": wall / SECONDS, "wall_seconds": wall,
         "memory_mib": peak_memory_mib(),
         "max_penetration": meter.penetration, "max_strain": meter.strain,
+        "self_crossings": meter.crossings, "self_crossings_time": meter.crossings_time,
+        "self_crossings_frames_counted": meter.crossings_counted,
         "shapes": meter.shapes, **extra,
     }))

@@ -177,7 +177,7 @@ def cloth_parameters(n: int, compression_scale: float = COMPRESSION_SCALE) -> di
 
 
 def build(n: int, quality: int, collision_quality: int, time_scale: float, colliders: bool,
-          frames: int, compression_scale: float = COMPRESSION_SCALE):
+          frames: int, compression_scale: float = COMPRESSION_SCALE, self_collision: bool = False):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
     sc.render.fps, sc.render.fps_base = spec.FPS, 1.0
@@ -212,7 +212,8 @@ def build(n: int, quality: int, collision_quality: int, time_scale: float, colli
     s.effector_weights.gravity = 1.0
     s.gravity = (0.0, 0.0, -spec.GRAVITY)
     c.use_collision = colliders
-    c.use_self_collision = False
+    c.use_self_collision = self_collision
+    c.self_distance_min = spec.THICKNESS          # the sheet keeps the spec's thickness from itself
     c.collision_quality = collision_quality
     c.distance_min = spec.THICKNESS * 9.0 / 8.0 - 0.001
     mu = math.sqrt(spec.FRICTION * COLLIDER_FRICTION)
@@ -258,7 +259,8 @@ def build(n: int, quality: int, collision_quality: int, time_scale: float, colli
                         f"compression {compression_scale:g} x tension; bending B / (50 h^2); damping Rayleigh 0.01 s",
         "distance_min": c.distance_min, "collider_thickness_outer": 0.001 if colliders else None,
         "collision_distance": (c.distance_min + 0.001) * 8.0 / 9.0,
-        "friction": mu, "cloth_friction": 100.0 * mu, "self_collision": False,
+        "friction": mu, "cloth_friction": 100.0 * mu, "self_collision": self_collision,
+        "self_distance_min": c.self_distance_min if self_collision else None,
         "sphere": f"UV sphere {SPHERE_SEGMENTS[0]} x {SPHERE_SEGMENTS[1]}, r = {spec.SPHERE_RADIUS}",
         "ground": f"{GROUND_SIZE:g} m quad",
         "render_threads": "FIXED 1",
@@ -317,6 +319,8 @@ def main() -> None:
     ap.add_argument("--compression-scale", type=float, default=COMPRESSION_SCALE,
                     help="compression / tension stiffness (simbake's subgrid 0.01)")
     ap.add_argument("--free-fall", action="store_true", help="the time check: no colliders")
+    ap.add_argument("--self-collision", choices=("on", "off"), default="off",
+                    help="Blender's self collision (distance = the spec's thickness)")
     args = ap.parse_args()
     if args.free_fall:
         import json
@@ -327,7 +331,7 @@ def main() -> None:
     frames = int(round(args.seconds * spec.FPS))
     n = args.n
     sc, cloth, start, settings = build(n, args.quality, args.collision_quality, args.time_scale, True, frames,
-                                       args.compression_scale)
+                                       args.compression_scale, args.self_collision == "on")
     positions = reader(cloth, n)
     meter = spec.Meter(n)
 

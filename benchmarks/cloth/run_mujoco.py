@@ -62,7 +62,8 @@ Settings (MuJoCo 4.0.0, Z up: Y-up (x, y, z) -> MuJoCo (x, -z, y) and back):
 - friction: MuJoCo takes the max of the two friction coefficients of a pair, so the flex, the
   sphere and the ground all get sqrt(0.4 x 0.5) = 0.447, simbake's geometric mean of the cloth
   (drape_spec.FRICTION) and the sphere/ground (0.5, assets/scenes/drape.toml);
-- self-collision off (selfcollide="none"). Gravity 9.81 along -Z.
+- self-collision off (selfcollide="none") unless --self-collision on (selfcollide="auto",
+  MuJoCo's choice of broad phase for the flex against itself). Gravity 9.81 along -Z.
 Only mj_step is timed (perf_counter; the model is compiled and mj_forward run before the
 clock starts); reading the positions and measuring each frame are not. The process CPU time of
 the stepping is reported too ("cpu_seconds"), as the wall time suffers on a busy machine.
@@ -124,7 +125,7 @@ def lumped_masses(n: int) -> np.ndarray:
     return mass
 
 
-def model_xml(n: int, time_step: float, colliders: bool) -> str:
+def model_xml(n: int, time_step: float, colliders: bool, selfcollide: str = "none") -> str:
     h = spec.SIZE / (n - 1)
     cx, cy, cz = (float(v) for v in to_zup(spec.SPHERE_CENTER))
     lines = [
@@ -145,7 +146,7 @@ def model_xml(n: int, time_step: float, colliders: bool) -> str:
         f'    <flexcomp name="cloth" type="grid" dim="2" dof="full" count="{n} {n} 1"'
         f' spacing="{h!r} {h!r} {h!r}" pos="0 0 {spec.HEIGHT!r}" radius="{RADIUS!r}"'
         f' mass="{spec.AREA_DENSITY * spec.SIZE ** 2!r}">',
-        f'      <contact condim="3" friction="{MU!r} 0.005 0.0001" solref="{SOLREF}" selfcollide="none"'
+        f'      <contact condim="3" friction="{MU!r} 0.005 0.0001" solref="{SOLREF}" selfcollide="{selfcollide}"'
         ' margin="0" gap="0"/>',
         f'      <elasticity young="{YOUNG!r}" poisson="{POISSON!r}" thickness="{THICKNESS!r}"'
         f' damping="{DAMPING!r}" elastic2d="both"/>',
@@ -156,9 +157,9 @@ def model_xml(n: int, time_step: float, colliders: bool) -> str:
     return "\n".join(lines)
 
 
-def build(n: int, time_step: float, colliders: bool = True):
+def build(n: int, time_step: float, colliders: bool = True, selfcollide: str = "none"):
     """The compiled model and data, and perm: drape vertex p is MuJoCo flex vertex perm[p]."""
-    mjspec = mujoco.MjSpec.from_string(model_xml(n, time_step, colliders))
+    mjspec = mujoco.MjSpec.from_string(model_xml(n, time_step, colliders, selfcollide))
     # vertex k of the flexcomp is body cloth_k at the grid point: from its position to (i, j)
     mass = lumped_masses(n)
     perm = np.full(n * n, -1)
@@ -229,8 +230,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=spec.SECONDS, help="simulated time")
     parser.add_argument("--free-fall", action="store_true",
                         help="no colliders, 0.3 s: print the drop against 1/2 g t^2 instead")
+    parser.add_argument("--self-collision", choices=("on", "off"), default="off",
+                        help='the flex against itself (selfcollide="auto")')
     args = parser.parse_args()
     n, k = args.n, args.steps_per_frame
+    selfcollide = "auto" if args.self_collision == "on" else "none"
     time_step = 1.0 / (spec.FPS * k)
 
     if args.free_fall:
@@ -252,7 +256,7 @@ def main() -> None:
 
     spec.SECONDS = args.seconds            # report() divides the wall time by it
     frames = int(round(args.seconds * spec.FPS))
-    model, data, perm = build(n, time_step)
+    model, data, perm = build(n, time_step, selfcollide=selfcollide)
     vertices = Vertices(model, data, perm)
     meter = spec.Meter(n)
     meter.frame(0.0, vertices())
@@ -283,7 +287,7 @@ def main() -> None:
         "rayleigh_damping": DAMPING, "flex_radius": RADIUS, "margin": 0.0, "gap": 0.0,
         "friction_per_geom_and_flex": MU, "combine": "max (MuJoCo)", "condim": 3,
         "solref": f"{SOLREF} (refsafe: the stiffest the step resolves)", "solimp": "default (0.9 0.95 0.001 0.5 2)",
-        "selfcollide": "none",
+        "selfcollide": selfcollide,
     }
     spec.report("mujoco", n, settings, wall, meter, version=mujoco.__version__, cpu_seconds=cpu,
                 steps=len(iterations), solver_iterations_mean=float(np.mean(iterations)),

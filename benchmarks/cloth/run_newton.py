@@ -40,7 +40,10 @@ so positions need no conversion):
 - friction: Newton combines mu by the geometric mean sqrt(mu_particle mu_shape), the same as
   simbake: the cloth gets drape_spec.FRICTION (0.4) and the sphere and the ground 0.5 (as in
   assets/scenes/drape.toml), so mu = sqrt(0.4 x 0.5) = 0.447 for every contact;
-- self-contact off (SolverVBD's default; optional in the problem). gravity 9.81 along -Y;
+- self-contact off (SolverVBD's default) unless --self-contact on: VBD's vertex-triangle and
+  edge-edge self-contact with the interaction distance at the spec's thickness
+  (particle_self_contact_margin) and as much again of detection slack (..._gap, as the
+  docstring advises). gravity 9.81 along -Y;
 - time stepping: 24 fps, 3 s; substeps per frame and VBD iterations per substep default to
   25 and 10: Newton's VBD cloth examples use 10 substeps of a 60 fps frame (dt = 1/600 s)
   and 10 iterations; 25 substeps of 1/24 s give the same dt;
@@ -107,7 +110,7 @@ def materials(n: int) -> dict:
             "edge_ke": edge_ke, "edge_kd": DAMPING * edge_ke}
 
 
-def build(n: int, substeps: int, iterations: int, colliders: bool = True):
+def build(n: int, substeps: int, iterations: int, colliders: bool = True, self_contact: bool = False):
     builder = newton.ModelBuilder(up_axis=newton.Axis.Y, gravity=(0.0, -spec.GRAVITY, 0.0))
     if colliders:
         cfg = newton.ModelBuilder.ShapeConfig(ke=CONTACT_KE, kd=CONTACT_KD, mu=COLLIDER_FRICTION, margin=0.0)
@@ -128,7 +131,9 @@ def build(n: int, substeps: int, iterations: int, colliders: bool = True):
     model.soft_contact_ke = CONTACT_KE
     model.soft_contact_kd = CONTACT_KD
     model.soft_contact_mu = spec.FRICTION
-    solver = newton.solvers.SolverVBD(model, iterations=iterations, friction_epsilon=FRICTION_EPSILON)
+    contact = ({"particle_enable_self_contact": True, "particle_self_contact_margin": spec.THICKNESS,
+                "particle_self_contact_gap": spec.THICKNESS} if self_contact else {})
+    solver = newton.solvers.SolverVBD(model, iterations=iterations, friction_epsilon=FRICTION_EPSILON, **contact)
     pipeline = newton.CollisionPipeline(model, soft_contact_gap=CONTACT_GAP)
     return Sim(model, solver, pipeline, substeps)
 
@@ -178,6 +183,8 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=ITERATIONS, help="VBD iterations per substep")
     parser.add_argument("--seconds", type=float, default=spec.SECONDS, help="simulated time")
     parser.add_argument("--no-capture", action="store_true", help="step in Python, no Warp graph")
+    parser.add_argument("--self-collision", choices=("on", "off"), default="off",
+                        help="VBD self-contact at the spec's thickness")
     parser.add_argument("--free-fall", action="store_true",
                         help="no colliders, 0.3 s: print the drop against 1/2 g t^2 instead")
     args = parser.parse_args()
@@ -200,7 +207,8 @@ def main() -> None:
         return
 
     # warm-up: compile every kernel (and the graph path) on a throwaway model
-    warm = build(spec.COMMON, args.substeps, args.iterations)
+    self_contact = args.self_collision == "on"
+    warm = build(spec.COMMON, args.substeps, args.iterations, self_contact=self_contact)
     if capture:
         warm.capture()
     warm.frame()
@@ -208,7 +216,7 @@ def main() -> None:
     del warm
 
     build_start = time.perf_counter()
-    sim = build(n, args.substeps, args.iterations)
+    sim = build(n, args.substeps, args.iterations, self_contact=self_contact)
     if capture:
         sim.capture()   # records the substep loop without running it
     build_seconds = time.perf_counter() - build_start
@@ -239,7 +247,8 @@ def main() -> None:
         "soft_contact_ke": CONTACT_KE, "soft_contact_kd": CONTACT_KD,
         "friction_cloth": spec.FRICTION, "friction_colliders": COLLIDER_FRICTION,
         "friction_combined": float(np.sqrt(spec.FRICTION * COLLIDER_FRICTION)),
-        "friction_epsilon": FRICTION_EPSILON, "self_contact": False,
+        "friction_epsilon": FRICTION_EPSILON, "self_contact": self_contact,
+        "self_contact_margin": spec.THICKNESS if self_contact else None,
         "mass_lumping": "density x area / 3 per triangle corner",
     }
     spec.report("newton", n, settings, wall, meter,
