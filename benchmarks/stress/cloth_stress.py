@@ -21,6 +21,9 @@ something breaks, and record where.
               triangle. Pass: finite, strain <= 11 %, penetration < 1 mm; the zero-area
               triangle must be refused with a one-line error naming the triangle.
 
+Every case also counts layers through layers at every frame end (benchmarks/cloth/crossings.py,
+NumPy, apart from the core): any crossing of two non-adjacent triangles fails the case.
+
 Each case runs in its own process with a 120 s timeout (a hang or crash is a failure).
 
     .venv/bin/python benchmarks/stress/cloth_stress.py            # all axes (~5 min)
@@ -45,6 +48,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(ROOT / "benchmarks" / "cloth"))
 import drape_spec as spec  # noqa: E402
+from crossings import crossing_count  # noqa: E402
 
 FPS = 24
 TIMEOUT = 120.0
@@ -70,20 +74,26 @@ def add_sphere(world, radius, center, kinematic=True):
                           np.array(IDENTITY), friction=0.5, kinematic=kinematic)
 
 
-def run_frames(world, frames: int, check=None) -> dict:
-    """Steps frame by frame; the worst strain and penetration at frame ends."""
+def run_frames(world, frames: int, triangles, check=None, substeps: int = 0) -> dict:
+    """Steps frame by frame (automatic substeps, or `substeps` a frame); the worst strain,
+    penetration and layer crossings (of cloth 0, with these triangles) at frame ends."""
     strain = penetration = 0.0
-    for _ in range(frames):
-        world.step_frame(1.0 / FPS)
+    crossings, crossing_frame = 0, None
+    for frame in range(1, frames + 1):
+        world.step_frame(1.0 / FPS, substeps)
         s = world.statistics()
         if not s["finite"]:
             return {"finite": False}
         strain = max(strain, s["max_cloth_strain"])
         penetration = max(penetration, s["cloth_penetration"])
+        count = crossing_count(world.cloth_state(0)[0], triangles)
+        if count > crossings:
+            crossings, crossing_frame = count, frame
         if check:
             check(world)
     s = world.statistics()
     return {"finite": True, "max_strain": strain, "max_penetration": penetration,
+            "self_crossings": crossings, "self_crossings_frame": crossing_frame,
             "cloth_steps": s["cloth_steps"], "cg_iterations": s["cloth_solver_iterations"]}
 
 
@@ -102,7 +112,7 @@ def case_stiffness(stiffness: float, model: str) -> dict:
         s = world.statistics()
         drop_work = mass * 9.81 * 1.0  # no vertex falls more than 1 m below its start
         worst_energy[0] = max(worst_energy[0], (s["kinetic_energy"] + s["elastic_energy"]) / drop_work)
-    out = run_frames(w, 48, energy)
+    out = run_frames(w, 48, t, energy)
     out["energy_over_work"] = worst_energy[0]
     if not out["finite"]:
         return dict(out, passed=False, failure="NaN")
@@ -115,6 +125,8 @@ def case_stiffness(stiffness: float, model: str) -> dict:
         failures.append(f"energy {worst_energy[0]:.2f} x the work of gravity")
     if mean_iterations > 1900:
         failures.append(f"CG at its cap ({mean_iterations:.0f} iterations a step)")
+    if out["self_crossings"]:
+        failures.append(f"{out['self_crossings']} layer crossings (frame {out['self_crossings_frame']})")
     return dict(out, passed=not failures, failure="; ".join(failures))
 
 
@@ -125,24 +137,12 @@ def drape_world(n: int, **settings):
     add_sphere(w, spec.SPHERE_RADIUS, spec.SPHERE_CENTER)
     v, t = spec.grid(n)
     w.add_cloth(v, t, stretch_stiffness=spec.STRETCH, friction=spec.FRICTION, thickness=spec.THICKNESS)
-    return w
+    return w, t
 
 
 def case_steps(cloth_step: float, fixed_substeps: int) -> dict:
-    w = drape_world(33, cloth_max_substep=cloth_step)
-    if fixed_substeps:
-        out = {"finite": True, "max_strain": 0.0, "max_penetration": 0.0}
-        for _ in range(72):
-            w.step_frame(1.0 / FPS, fixed_substeps)
-            s = w.statistics()
-            if not s["finite"]:
-                out["finite"] = False
-                break
-            out["max_strain"] = max(out["max_strain"], s["max_cloth_strain"])
-            out["max_penetration"] = max(out["max_penetration"], s["cloth_penetration"])
-    else:
-        out = run_frames(w, 72)
-    return judge(out)
+    w, t = drape_world(33, cloth_max_substep=cloth_step)
+    return judge(run_frames(w, 72, t, substeps=fixed_substeps))
 
 
 def judge(out: dict, strain: bool = True) -> dict:
@@ -153,6 +153,8 @@ def judge(out: dict, strain: bool = True) -> dict:
         failures.append(f"strain {out['max_strain']:.3f}")
     if out["max_penetration"] > PENETRATION_BOUND:
         failures.append(f"penetration {1000 * out['max_penetration']:.1f} mm")
+    if out["self_crossings"]:
+        failures.append(f"{out['self_crossings']} layer crossings (frame {out['self_crossings_frame']})")
     return dict(out, passed=not failures, failure="; ".join(failures))
 
 
@@ -171,7 +173,7 @@ def case_curtain(speed: float) -> dict:
     w.set_kinematic_track(ball, [0.0, duration], np.array([[0.0, 1.0, -1.0], [0.0, 1.0, 1.0]]),
                           np.array([IDENTITY, IDENTITY]))
     frames = max(int(math.ceil(duration * FPS)) + 12, 24)
-    return judge(run_frames(w, frames))
+    return judge(run_frames(w, frames, t))
 
 
 def case_spinner(spin: float) -> dict:
@@ -187,7 +189,7 @@ def case_spinner(spin: float) -> dict:
     w.set_kinematic_track(box, list(times), np.tile([0.0, 0.6, 0.0], (len(times), 1)), q)
     v, t = grid(33, 1.4, 1.0)
     w.add_cloth(v, t, friction=0.8)
-    return judge(run_frames(w, 48), strain=False)
+    return judge(run_frames(w, 48, t), strain=False)
 
 
 def sheet(n: int = 17):
@@ -232,7 +234,7 @@ def case_triangles(kind: str, size: float) -> dict:
                 "failure": "" if kind == "zero" and one_line else f"refused: {message}"}
     if kind == "zero":
         return {"finite": True, "passed": False, "failure": "a zero-area triangle was accepted"}
-    return judge(run_frames(w, 48))
+    return judge(run_frames(w, 48, t))
 
 
 AXES = {
@@ -280,12 +282,13 @@ def write_markdown(results: dict, path: Path) -> None:
              "Cases and pass criteria: the script's docstring. Strain and penetration are the worst",
              "at any frame end.", ""]
     for axis, cases in results.items():
-        lines += [f"## {axis}", "", "| case | passed | max strain | max penetration (mm) | CG iterations / step | wall s | failure |",
-                  "| --- | --- | --- | --- | --- | --- | --- |"]
+        lines += [f"## {axis}", "", "| case | passed | max strain | max penetration (mm) | layer crossings | CG iterations / step | wall s | failure |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]
         for name, r in cases.items():
             pen = r.get("max_penetration")
             lines.append(f"| {name} | {'yes' if r['passed'] else '**no**'} | {fmt(r.get('max_strain'))} | "
-                         f"{fmt(None if pen is None else 1000 * pen)} | {fmt(r.get('mean_cg_iterations'))} | "
+                         f"{fmt(None if pen is None else 1000 * pen)} | {r.get('self_crossings', '-')} | "
+                         f"{fmt(r.get('mean_cg_iterations'))} | "
                          f"{fmt(r.get('wall_seconds'), 2)} | {r.get('failure') or r.get('refused', '')} |")
         lines.append("")
     path.write_text("\n".join(lines))
