@@ -52,6 +52,7 @@ void World::begin_impulse_stage(double dt, bool with_forces, bool average_veloci
     else if (!average_velocities) omega_[i] = inverse_inertia_[i] * states_[i].l;
     update_candidate(i);
   }
+  stale_list_.clear();
 }
 
 void World::update_candidate(int i) {
@@ -74,10 +75,19 @@ void World::update_candidate(int i) {
   ++version_[i];
 }
 
+// Marks body i's candidate as behind its velocities; the list keeps the refresh in
+// proportion to the bodies that took impulses, not to the world
+void World::mark_stale(int i) {
+  if (!stale_[i]) stale_list_.push_back(i);
+  stale_[i] = 1;
+}
+
 void World::refresh_stale_candidates() {
-  for (int i = 0; i < body_count(); ++i) {
+  // (a body refreshed by a whole-world pass since it was listed is no longer stale)
+  for (int i : stale_list_) {
     if (stale_[i]) update_candidate(i);
   }
+  stale_list_.clear();
 }
 
 Vec3 World::point_velocity(int i, const Vec3& x) const {
@@ -226,7 +236,7 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
       states_[i].v += sign * defs_[i].inverse_mass * J;
       states_[i].l += dl;
       omega_[i] += inverse_inertia_[i] * dl;
-      stale_[i] = 1;
+      mark_stale(i);
       ++version_[i];
     }
     sign = -1.0;
@@ -524,24 +534,41 @@ bool World::apply_contact_impulse(ContactPoint& contact) {
 // mass), so the bottom of a stack is settled first and then holds everything above it.
 // Bodies connected to nothing immovable keep the result of the sweeps.
 
+// Levels by breadth-first search; shock_.order lists the connected bodies level by level
 void World::assign_contact_levels() {
   const int n = body_count();
   std::fill(level_.begin(), level_.end(), -1);
-  std::vector<std::vector<int>> neighbours(n);
-  std::vector<int> queue;
+  // the contact graph between dynamic bodies, as adjacency lists in one array
+  std::vector<int>& start = shock_.neighbour_start;
+  std::vector<int>& neighbours = shock_.neighbours;
+  std::vector<int>& queue = shock_.order;
+  start.assign(n + 1, 0);
+  queue.clear();
+  auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
   for (const ContactPoint& c : contacts_) {
     const int a = c.point.a, b = c.point.b;
-    const bool a_fixed = defs_[a].kinematic, b_fixed = b == kGround || defs_[b].kinematic;
+    if (fixed(a) || fixed(b)) continue;
+    ++start[a + 1];
+    ++start[b + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  neighbours.resize(start[n]);
+  std::vector<int>& filled = body_scratch_;
+  filled.assign(start.begin(), start.end() - 1);
+  for (const ContactPoint& c : contacts_) {
+    const int a = c.point.a, b = c.point.b;
+    const bool a_fixed = fixed(a), b_fixed = fixed(b);
     if (b_fixed && !a_fixed && level_[a] < 0) { level_[a] = 0; queue.push_back(a); }
     if (a_fixed && !b_fixed && level_[b] < 0) { level_[b] = 0; queue.push_back(b); }
     if (!a_fixed && !b_fixed) {
-      neighbours[a].push_back(b);
-      neighbours[b].push_back(a);
+      neighbours[filled[a]++] = b;
+      neighbours[filled[b]++] = a;
     }
   }
   for (std::size_t head = 0; head < queue.size(); ++head) {
     const int i = queue[head];
-    for (int j : neighbours[i]) {
+    for (int k = start[i]; k < start[i + 1]; ++k) {
+      const int j = neighbours[k];
       if (level_[j] < 0) {
         level_[j] = level_[i] + 1;
         queue.push_back(j);
@@ -554,8 +581,12 @@ void World::propagate_shocks() {
   if (contacts_.empty()) return;
   // each body's velocities and fastest point speed |v| + |omega| r before the levels
   const int n = body_count();
-  std::vector<Vec3> v_before(n), l_before(n);
-  std::vector<double> speed_before(n);
+  std::vector<Vec3>& v_before = shock_.v_before;
+  std::vector<Vec3>& l_before = shock_.l_before;
+  std::vector<double>& speed_before = shock_.speed_before;
+  v_before.resize(n);
+  l_before.resize(n);
+  speed_before.resize(n);
   auto point_speed = [&](int i) {
     return states_[i].v.norm() + (inverse_inertia_[i] * states_[i].l).norm() * defs_[i].bounding_radius;
   };
@@ -568,16 +599,23 @@ void World::propagate_shocks() {
   // the ground and kinematic bodies sit below level 0; bodies connected to neither
   // (level -1) keep the result of the sweeps
   auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
-  std::vector<std::vector<int>> by_level;  // contacts by the level of their upper body
+  std::vector<std::vector<int>>& by_level = shock_.by_level;  // contacts by the level of their upper body
+  for (std::vector<int>& contacts : by_level) contacts.clear();
+  std::size_t levels = 0;
   for (std::size_t k = 0; k < contacts_.size(); ++k) {
     const int a = contacts_[k].point.a, b = contacts_[k].point.b;
     if ((!fixed(a) && level_[a] < 0) || (!fixed(b) && level_[b] < 0)) continue;
     const int level = std::max(fixed(a) ? -1 : level_[a], fixed(b) ? -1 : level_[b]);
     if (level < 0) continue;
-    if (level >= static_cast<int>(by_level.size())) by_level.resize(level + 1);
+    levels = std::max(levels, static_cast<std::size_t>(level) + 1);
+    if (levels > by_level.size()) by_level.resize(levels);
     by_level[level].push_back(static_cast<int>(k));
   }
-  for (std::size_t level = 0; level < by_level.size(); ++level) {
+  // every connected body is frozen once its level is solved (shock_.order is sorted by
+  // level, and a body of level l has a contact in level l)
+  const std::vector<int>& order = shock_.order;
+  std::size_t next = 0;
+  for (std::size_t level = 0; level < levels; ++level) {
     for (int sweep = 0; sweep < settings_.shock_sweeps; ++sweep) {
       refresh_stale_candidates();
       bool any = false;
@@ -585,17 +623,16 @@ void World::propagate_shocks() {
       if (!any) break;
     }
     // freezing changes the K of every contact of the body: its version changes too
-    for (int i = 0; i < body_count(); ++i) {
-      if (level_[i] == static_cast<int>(level)) {
-        frozen_[i] = 1;
-        ++version_[i];
-      }
+    for (; next < order.size() && level_[order[next]] == static_cast<int>(level); ++next) {
+      frozen_[order[next]] = 1;
+      ++version_[order[next]];
     }
   }
-  for (int i = 0; i < body_count(); ++i) {
-    if (frozen_[i]) ++version_[i];
+  for (int i : order) {
+    if (!frozen_[i]) continue;
+    ++version_[i];
+    frozen_[i] = 0;
   }
-  std::fill(frozen_.begin(), frozen_.end(), 0);
   // Frozen levels are infinite masses, and where deep overlaps give a body contacts that
   // push opposite ways (the level set's normal deep inside points to the nearest face, not
   // the separating one) the levels can throw it off at any speed. Shock propagation only
@@ -604,7 +641,8 @@ void World::propagate_shocks() {
   // to the sweeps' velocities (momentum exchanged in equal pairs, speeds the recovery caps).
   // Twice: a level may add the recovery of the level below to its own (the top of a tower
   // settling at 1/60 s substeps gains 0.5 m/s and more, and must keep it to stand)
-  std::vector<int> group(n);
+  std::vector<int>& group = shock_.group;
+  group.resize(n);
   std::iota(group.begin(), group.end(), 0);
   auto root = [&](int i) {
     while (group[i] != i) i = group[i] = group[group[i]];
@@ -613,7 +651,8 @@ void World::propagate_shocks() {
   for (const ContactPoint& c : contacts_) {
     if (c.point.b != kGround) group[root(c.point.a)] = root(c.point.b);
   }
-  std::vector<char> thrown(n, 0);
+  std::vector<char>& thrown = shock_.thrown;
+  thrown.assign(n, 0);
   for (int i = 0; i < n; ++i) {
     if (movable(i) && point_speed(i) > speed_before[i] + 2.0 * settings_.max_recovery_speed) {
       thrown[root(i)] = 1;
@@ -623,7 +662,7 @@ void World::propagate_shocks() {
     if (!thrown[root(i)] || !movable(i)) continue;
     states_[i].v = v_before[i];
     states_[i].l = l_before[i];
-    stale_[i] = 1;
+    mark_stale(i);
     ++version_[i];
   }
   refresh_stale_candidates();
@@ -641,6 +680,7 @@ void World::update_positions(double dt) {
     states_[i].x = candidates_[i].x;
     states_[i].q = candidates_[i].q;
   }
+  stale_list_.clear();
 }
 
 }  // namespace simbake

@@ -188,6 +188,26 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
+  // per-step scratch of shock propagation, kept so that a step allocates nothing
+  struct ShockScratch {
+    std::vector<Vec3> v_before, l_before;     // (nbody) velocities before the levels
+    std::vector<double> speed_before;         // (nbody) fastest point speed before (m/s)
+    std::vector<int> neighbour_start;         // (nbody + 1) contact graph: body i's neighbours
+    std::vector<int> neighbours;              // are neighbours[start[i] .. start[i + 1])
+    std::vector<int> order;                   // connected bodies by level (breadth first)
+    std::vector<std::vector<int>> by_level;   // contacts by the level of their upper body
+    std::vector<int> group;                   // (nbody) union-find of contact groups
+    std::vector<char> thrown;                 // (nbody) group roots thrown off by the levels
+  };
+  // scratch of the broad phase's grid (see overlapping_pairs)
+  struct GridScratch {
+    std::vector<double> sides;                  // largest side of each finite box (m)
+    std::vector<std::array<long long, 6>> ranges;  // (nbody) cells a box covers, lower and
+                                                // upper (x, y, z); lower x -1 for a large box
+    std::vector<int> large;                     // boxes tested against every other box
+    std::vector<int> cell_start;                // (ncell + 1) cell c holds
+    std::vector<int> members;                   // members[cell_start[c] .. cell_start[c + 1])
+  };
   // one substep of the rigid bodies (every stage but step_cloths)
   void step_bodies(double dt);
   // the automatic substeps and cloth steps of the next frame (see automatic_substeps)
@@ -215,7 +235,7 @@ class World {
   bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
   bool moving_kinematic(int i) const;
   void compute_boxes(double dt);
-  void overlapping_pairs(std::vector<std::pair<int, int>>& out) const;
+  void overlapping_pairs(std::vector<std::pair<int, int>>& out);
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
   double cloth_penetration() const;
@@ -223,6 +243,7 @@ class World {
   void wake_island(int i);
   void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
   void update_candidate(int i);
+  void mark_stale(int i);
   void refresh_stale_candidates();
   Vec3 point_velocity(int i, const Vec3& x) const;
   void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
@@ -256,6 +277,7 @@ class World {
                                             // stage uses at points (rad/s, world)
   std::vector<Mat3> inverse_inertia_;       // (nbody) world I^-1 at the start-of-step orientation
   std::vector<char> stale_;                 // (nbody) candidate behind the latest impulse
+  std::vector<int> stale_list_;             // the bodies marked stale since the last refresh
   std::vector<std::uint64_t> version_;      // (nbody) bumped whenever v, L or the candidate change
   std::vector<char> frozen_;                // (nbody) immovable for now (shock propagation)
   std::vector<int> level_;                  // (nbody) contact-graph distance from the ground or
@@ -275,6 +297,8 @@ class World {
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
+  ShockScratch shock_;                      // reused by propagate_shocks
+  GridScratch grid_;                        // reused by overlapping_pairs
   std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
   double dt_ = 0.0;                         // current substep (s)
   double time_ = 0.0;                       // simulated time at the start of the step (s)
