@@ -211,10 +211,16 @@ bool World::touching(int mover, int sleeper, double dt) const {
     const Points& samples = defs_[bodies[k]].samples;
     const Vec3 centre_inside = poses[k].apply_inverse(centres[1 - k]);
     const double radius = inside.bounding_radius * inside.bounding_radius;
-    for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-      if ((samples.row(s).transpose() - centre_inside).squaredNorm() > radius) continue;
-      const Vec3 p = poses[1 - k].apply_inverse(poses[k].apply(samples.row(s).transpose()));
-      if (inside.shape->bounds().contains(p) && inside.shape->phi(p) < 0.0) return true;
+    const std::vector<SampleBlock>& blocks = defs_[bodies[k]].sample_blocks;
+    for (std::size_t block = 0; block < blocks.size(); ++block) {
+      if (!blocks[block].may_reach(centre_inside, inside.bounding_radius)) continue;
+      const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
+      const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
+      for (Eigen::Index s = first; s < end; ++s) {
+        if ((samples.row(s).transpose() - centre_inside).squaredNorm() > radius) continue;
+        const Vec3 p = poses[1 - k].apply_inverse(poses[k].apply(samples.row(s).transpose()));
+        if (inside.shape->bounds().contains(p) && inside.shape->phi(p) < 0.0) return true;
+      }
     }
   }
   return false;

@@ -184,27 +184,37 @@ bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out
     reach = defs_[b].bounding_radius * defs_[b].bounding_radius;
     local_bounds = defs_[b].shape->bounds();
   }
-  for (Eigen::Index k = 0; k < samples.rows(); ++k) {
-    const Vec3 m = samples.row(k).transpose();
-    double phi;
-    Vec3 n;
-    if (b == kGround) {
-      phi = m.dot(down_in_a) + ground_offset;
-      if (phi >= 0.0) continue;
-      n = Vec3::UnitY();
-    } else {
-      if ((m - centre_in_a).squaredNorm() > reach) continue;
-      const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
-      if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
-      Vec3 n_local;
-      phi = defs_[b].shape->phi_and_normal(p, n_local);
-      // within kTouching of the surface is touching, not penetrating: a sample lying exactly
-      // on another body's edge (an exactly aligned stack) would otherwise act, by round-off,
-      // with the side face's normal and push the stack sideways
-      if (phi >= -kTouching) continue;
-      n = pose_b.rotation * n_local;
+  // (whole blocks of samples first: most of a body's samples are far from the other)
+  const std::vector<SampleBlock>& blocks = defs_[a].sample_blocks;
+  for (std::size_t block = 0; block < blocks.size(); ++block) {
+    if (b == kGround ? !blocks[block].may_be_below(down_in_a, ground_offset)
+                     : !blocks[block].may_reach(centre_in_a, defs_[b].bounding_radius)) {
+      continue;
     }
-    out.push_back({a, b, candidate_poses_[a].apply(m), n, phi, static_cast<int>(k), s});
+    const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
+    const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
+    for (Eigen::Index k = first; k < end; ++k) {
+      const Vec3 m = samples.row(k).transpose();
+      double phi;
+      Vec3 n;
+      if (b == kGround) {
+        phi = m.dot(down_in_a) + ground_offset;
+        if (phi >= 0.0) continue;
+        n = Vec3::UnitY();
+      } else {
+        if ((m - centre_in_a).squaredNorm() > reach) continue;
+        const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
+        if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
+        Vec3 n_local;
+        phi = defs_[b].shape->phi_and_normal(p, n_local);
+        // within kTouching of the surface is touching, not penetrating: a sample lying exactly
+        // on another body's edge (an exactly aligned stack) would otherwise act, by round-off,
+        // with the side face's normal and push the stack sideways
+        if (phi >= -kTouching) continue;
+        n = pose_b.rotation * n_local;
+      }
+      out.push_back({a, b, candidate_poses_[a].apply(m), n, phi, static_cast<int>(k), s});
+    }
   }
   return out.size() > before;
 }

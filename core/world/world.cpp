@@ -57,6 +57,7 @@ int World::add_body(const BodyDesc& desc) {
   def.restitution = desc.restitution;
   def.shape = desc.shape;
   def.samples = desc.samples;
+  def.sample_blocks = sample_blocks(def.samples);
   def.center = desc.unit_mass.center;
 
   // principal axes of the inertia tensor, as a proper rotation
