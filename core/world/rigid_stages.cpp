@@ -35,6 +35,16 @@ namespace {
 constexpr double kTrustedDepth = 0.25;  // of the thinner body's thickness: deeper, the level
                                         // set's normal no longer points the way out
 constexpr double kImpactSpeed = 1.0;    // (m/s) slower approaches are settling, not impacts
+
+// Union-find over bodies: every body its own set, then the root of i's set (path halving)
+void reset_sets(std::vector<int>& parent, int n) {
+  parent.resize(n);
+  std::iota(parent.begin(), parent.end(), 0);
+}
+int set_root(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -52,7 +62,7 @@ void World::begin_impulse_stage(double dt, bool with_forces, bool average_veloci
     else if (!average_velocities) omega_[i] = inverse_inertia_[i] * states_[i].l;
     update_candidate(i);
   }
-  stale_list_.clear();
+  log_.stale.clear();
 }
 
 void World::update_candidate(int i) {
@@ -75,19 +85,19 @@ void World::update_candidate(int i) {
   ++version_[i];
 }
 
-// Marks body i's candidate as behind its velocities; the list keeps the refresh in
+// Marks body i's candidate as behind its velocities; the log's list keeps the refresh in
 // proportion to the bodies that took impulses, not to the world
-void World::mark_stale(int i) {
-  if (!stale_[i]) stale_list_.push_back(i);
+void World::mark_stale(int i, ImpulseLog& log) {
+  if (!stale_[i]) log.stale.push_back(i);
   stale_[i] = 1;
 }
 
-void World::refresh_stale_candidates() {
+void World::refresh_stale_candidates(ImpulseLog& log) {
   // (a body refreshed by a whole-world pass since it was listed is no longer stale)
-  for (int i : stale_list_) {
+  for (int i : log.stale) {
     if (stale_[i]) update_candidate(i);
   }
-  stale_list_.clear();
+  log.stale.clear();
 }
 
 Vec3 World::point_velocity(int i, const Vec3& x) const {
@@ -238,7 +248,7 @@ Mat3 World::pair_impulse_matrix(const Penetration& p) const {
 // Body a takes J and body b takes -J, in linear and angular momentum; the stage's angular
 // velocity follows (exactly for start-of-step velocities, to first order for average ones)
 // and the candidate is marked stale
-void World::exchange_impulse(const Penetration& p, const Vec3& J) {
+void World::exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log) {
   double sign = 1.0;
   for (int i : {p.a, p.b}) {
     if (movable(i)) {
@@ -246,12 +256,12 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
       states_[i].v += sign * defs_[i].inverse_mass * J;
       states_[i].l += dl;
       omega_[i] += inverse_inertia_[i] * dl;
-      mark_stale(i);
+      mark_stale(i, log);
       ++version_[i];
     }
     sign = -1.0;
   }
-  ++stats_.impulses;
+  ++log.impulses;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -264,8 +274,8 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
 bool World::apply_collision_impulse(const Penetration& p, double restitution, double friction) {
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
   if (v.dot(p.n) >= -settings_.contact_tolerance) return false;
-  exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction));
-  refresh_stale_candidates();
+  exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction), log_);
+  refresh_stale_candidates(log_);
   return true;
 }
 
@@ -353,6 +363,7 @@ void World::resolve_collisions(double dt) {
     }
     if (!any) break;
   }
+  collect_impulses();
 }
 
 // Velocities: gravity on every dynamic body (no torque: it acts at the centre of mass)
@@ -369,15 +380,72 @@ void World::update_velocities(double dt) {
 // re-evaluates every contact at the bodies' current candidates with average velocities,
 // until no impulse changes anything. (Points that only start to penetrate during the
 // sweeps are left to the next step's collision stage, which catches them with forces.)
+//
+// Islands. Bodies connected through contacts (the ground and kinematic bodies, which no
+// impulse moves, do not connect) form islands that share no movable body, so each island is
+// swept on its own, in parallel, its contacts in their order. An island whose sweep applies
+// no impulse is at its fixed point (every contact has seen its bodies as they are), so
+// stopping it there gives exactly the bits of sweeping every contact until none changes, on
+// any number of threads.
 
 void World::resolve_contacts(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/false, /*average_velocities=*/true);
   find_contacts();
-  for (int sweep = 0; sweep < settings_.contact_sweeps; ++sweep) {
-    refresh_stale_candidates();
-    bool any = false;
-    for (ContactPoint& contact : contacts_) any |= apply_contact_impulse(contact);
-    if (!any) break;
+  find_contact_islands();
+  const IslandScratch& islands = islands_;
+  tbb::parallel_for(0, islands.count, [&](int k) {
+    ImpulseLog& log = islands_.logs[k];
+    for (int sweep = 0; sweep < settings_.contact_sweeps; ++sweep) {
+      refresh_stale_candidates(log);
+      bool any = false;
+      for (int c = islands.contact_start[k]; c < islands.contact_start[k + 1]; ++c) {
+        any |= apply_contact_impulse(contacts_[islands.contacts[c]], log);
+      }
+      if (!any) break;
+    }
+  });
+  collect_impulses();
+}
+
+// The islands of this step's contacts, numbered in the order of their first contact, each
+// with its contacts in contact order; their logs start empty
+void World::find_contact_islands() {
+  const int n = body_count();
+  IslandScratch& islands = islands_;
+  std::vector<int>& parent = islands.parent;
+  reset_sets(parent, n);
+  auto root = [&](int i) { return set_root(parent, i); };
+  auto dynamic = [&](int i) { return i != kGround && !defs_[i].kinematic; };
+  for (const ContactPoint& c : contacts_) {
+    if (dynamic(c.point.a) && dynamic(c.point.b)) parent[root(c.point.a)] = root(c.point.b);
+  }
+  // each contact's island is that of its dynamic body (a contact has one at least)
+  std::vector<int>& index = islands.index;
+  std::vector<int>& of_contact = islands.of_contact;
+  index.assign(n, -1);
+  of_contact.resize(contacts_.size());
+  islands.count = 0;
+  for (std::size_t k = 0; k < contacts_.size(); ++k) {
+    const int r = root(dynamic(contacts_[k].point.a) ? contacts_[k].point.a : contacts_[k].point.b);
+    if (index[r] < 0) index[r] = islands.count++;
+    of_contact[k] = index[r];
+  }
+  std::vector<int>& of_body = islands.of_body;
+  of_body.resize(n);
+  for (int i = 0; i < n; ++i) of_body[i] = index[root(i)];
+  // contacts by island (a counting sort keeps their order)
+  std::vector<int>& start = islands.contact_start;
+  start.assign(islands.count + 1, 0);
+  for (int island : of_contact) ++start[island + 1];
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<int>& filled = body_scratch_;
+  filled.assign(start.begin(), start.end() - 1);
+  islands.contacts.resize(contacts_.size());
+  for (std::size_t k = 0; k < contacts_.size(); ++k) islands.contacts[filled[of_contact[k]]++] = static_cast<int>(k);
+  if (static_cast<int>(islands.logs.size()) < islands.count) islands.logs.resize(islands.count);
+  for (int k = 0; k < islands.count; ++k) {
+    islands.logs[k].stale.clear();
+    islands.logs[k].impulses = 0;
   }
 }
 
@@ -505,7 +573,7 @@ void World::refresh_contact(Penetration& p) const {
 // by a hard impact, or gathered while a tall stack first settles, would stay for good. A point
 // whose bodies have not changed since it was last evaluated is skipped: the update would
 // give the same answer, so converged parts of a pile cost nothing more.
-bool World::apply_contact_impulse(ContactPoint& contact) {
+bool World::apply_contact_impulse(ContactPoint& contact, ImpulseLog& log) {
   Penetration& p = contact.point;
   const bool a_moves = movable(p.a), b_moves = movable(p.b);
   if (!a_moves && !b_moves) return false;
@@ -530,7 +598,7 @@ bool World::apply_contact_impulse(ContactPoint& contact) {
     return false;
   }
   contact.total = total;
-  exchange_impulse(p, change);
+  exchange_impulse(p, change, log);
   contact.seen_a = p.a == kGround ? 0 : version_[p.a];
   contact.seen_b = p.b == kGround ? 0 : version_[p.b];
   return true;
@@ -607,38 +675,58 @@ void World::propagate_shocks() {
   }
   assign_contact_levels();
   // the ground and kinematic bodies sit below level 0; bodies connected to neither
-  // (level -1) keep the result of the sweeps
+  // (level -1) keep the result of the sweeps. A contact's level is that of its upper body
   auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
-  std::vector<std::vector<int>>& by_level = shock_.by_level;  // contacts by the level of their upper body
-  for (std::vector<int>& contacts : by_level) contacts.clear();
-  std::size_t levels = 0;
+  std::vector<int>& contact_level = shock_.contact_level;
+  contact_level.resize(contacts_.size());
   for (std::size_t k = 0; k < contacts_.size(); ++k) {
     const int a = contacts_[k].point.a, b = contacts_[k].point.b;
-    if ((!fixed(a) && level_[a] < 0) || (!fixed(b) && level_[b] < 0)) continue;
-    const int level = std::max(fixed(a) ? -1 : level_[a], fixed(b) ? -1 : level_[b]);
-    if (level < 0) continue;
-    levels = std::max(levels, static_cast<std::size_t>(level) + 1);
-    if (levels > by_level.size()) by_level.resize(levels);
-    by_level[level].push_back(static_cast<int>(k));
+    const bool connected = (fixed(a) || level_[a] >= 0) && (fixed(b) || level_[b] >= 0);
+    contact_level[k] = connected ? std::max(fixed(a) ? -1 : level_[a], fixed(b) ? -1 : level_[b]) : -1;
   }
-  // every connected body is frozen once its level is solved (shock_.order is sorted by
-  // level, and a body of level l has a contact in level l)
-  const std::vector<int>& order = shock_.order;
-  std::size_t next = 0;
-  for (std::size_t level = 0; level < levels; ++level) {
-    for (int sweep = 0; sweep < settings_.shock_sweeps; ++sweep) {
-      refresh_stale_candidates();
-      bool any = false;
-      for (int k : by_level[level]) any |= apply_contact_impulse(contacts_[k]);
-      if (!any) break;
+  // each island's levelled bodies, by level (shock_.order is sorted by level)
+  IslandScratch& islands = islands_;
+  std::vector<int>& body_start = islands.body_start;
+  body_start.assign(islands.count + 1, 0);
+  for (int i : shock_.order) ++body_start[islands.of_body[i] + 1];
+  std::partial_sum(body_start.begin(), body_start.end(), body_start.begin());
+  std::vector<int>& filled = body_scratch_;
+  filled.assign(body_start.begin(), body_start.end() - 1);
+  islands.bodies.resize(shock_.order.size());
+  for (int i : shock_.order) islands.bodies[filled[islands.of_body[i]]++] = i;
+  if (islands.by_level.size() < islands.logs.size()) islands.by_level.resize(islands.logs.size());
+  // islands in parallel (see resolve_contacts), levels in turn within each: every body of
+  // a level is frozen once the level is solved (a body of level l has a contact in level l)
+  tbb::parallel_for(0, islands.count, [&](int k) {
+    ImpulseLog& log = islands.logs[k];
+    std::vector<int>& by_level = islands.by_level[k];
+    by_level.clear();
+    for (int c = islands.contact_start[k]; c < islands.contact_start[k + 1]; ++c) {
+      if (contact_level[islands.contacts[c]] >= 0) by_level.push_back(islands.contacts[c]);
     }
-    // freezing changes the K of every contact of the body: its version changes too
-    for (; next < order.size() && level_[order[next]] == static_cast<int>(level); ++next) {
-      frozen_[order[next]] = 1;
-      ++version_[order[next]];
+    std::stable_sort(by_level.begin(), by_level.end(),
+                     [&](int l, int r) { return contact_level[l] < contact_level[r]; });
+    int next = body_start[k];
+    for (std::size_t first = 0; first < by_level.size();) {
+      const int level = contact_level[by_level[first]];
+      std::size_t last = first;
+      while (last < by_level.size() && contact_level[by_level[last]] == level) ++last;
+      for (int sweep = 0; sweep < settings_.shock_sweeps; ++sweep) {
+        refresh_stale_candidates(log);
+        bool any = false;
+        for (std::size_t c = first; c < last; ++c) any |= apply_contact_impulse(contacts_[by_level[c]], log);
+        if (!any) break;
+      }
+      // freezing changes the K of every contact of the body: its version changes too
+      for (; next < body_start[k + 1] && level_[islands.bodies[next]] == level; ++next) {
+        frozen_[islands.bodies[next]] = 1;
+        ++version_[islands.bodies[next]];
+      }
+      first = last;
     }
-  }
-  for (int i : order) {
+    refresh_stale_candidates(log);
+  });
+  for (int i : shock_.order) {
     if (!frozen_[i]) continue;
     ++version_[i];
     frozen_[i] = 0;
@@ -652,12 +740,8 @@ void World::propagate_shocks() {
   // Twice: a level may add the recovery of the level below to its own (the top of a tower
   // settling at 1/60 s substeps gains 0.5 m/s and more, and must keep it to stand)
   std::vector<int>& group = shock_.group;
-  group.resize(n);
-  std::iota(group.begin(), group.end(), 0);
-  auto root = [&](int i) {
-    while (group[i] != i) i = group[i] = group[group[i]];
-    return i;
-  };
+  reset_sets(group, n);
+  auto root = [&](int i) { return set_root(group, i); };
   for (const ContactPoint& c : contacts_) {
     if (c.point.b != kGround) group[root(c.point.a)] = root(c.point.b);
   }
@@ -672,10 +756,22 @@ void World::propagate_shocks() {
     if (!thrown[root(i)] || !movable(i)) continue;
     states_[i].v = v_before[i];
     states_[i].l = l_before[i];
-    mark_stale(i);
+    mark_stale(i, log_);
     ++version_[i];
   }
-  refresh_stale_candidates();
+  refresh_stale_candidates(log_);
+  collect_impulses();
+}
+
+// The impulses of the stage so far into the statistics (the logs' counts are summed after
+// the parallel part, so the total is the same on any number of threads)
+void World::collect_impulses() {
+  for (int k = 0; k < islands_.count; ++k) {
+    stats_.impulses += islands_.logs[k].impulses;
+    islands_.logs[k].impulses = 0;
+  }
+  stats_.impulses += log_.impulses;
+  log_.impulses = 0;
 }
 
 // Positions: x += dt v and the torque-free rotation with the final L (what the contact
@@ -690,7 +786,7 @@ void World::update_positions(double dt) {
     states_[i].x = candidates_[i].x;
     states_[i].q = candidates_[i].q;
   }
-  stale_list_.clear();
+  log_.stale.clear();
 }
 
 }  // namespace simbake

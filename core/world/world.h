@@ -188,6 +188,26 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
+  // What impulses leave behind, per island (or per serial stage): the bodies whose
+  // candidates are stale, and how many impulses were applied
+  struct ImpulseLog {
+    std::vector<int> stale;
+    long long impulses = 0;
+  };
+  // The islands of the contact stage (see resolve_contacts), rebuilt every step
+  struct IslandScratch {
+    int count = 0;
+    std::vector<int> parent;                  // (nbody) union-find through contacts
+    std::vector<int> index;                   // (nbody) island of a root body, else -1
+    std::vector<int> of_body;                 // (nbody) island of each body, -1 with no contact
+    std::vector<int> of_contact;              // (ncontact) island of each contact
+    std::vector<int> contact_start;           // (count + 1) island k's contacts are
+    std::vector<int> contacts;                //   contacts[contact_start[k] .. contact_start[k + 1])
+    std::vector<int> body_start;              // (count + 1) island k's bodies with a level,
+    std::vector<int> bodies;                  //   by level, likewise (shock propagation)
+    std::vector<std::vector<int>> by_level;   // (count) island k's contacts by level
+    std::vector<ImpulseLog> logs;             // (count)
+  };
   // per-step scratch of shock propagation, kept so that a step allocates nothing
   struct ShockScratch {
     std::vector<Vec3> v_before, l_before;     // (nbody) velocities before the levels
@@ -195,7 +215,8 @@ class World {
     std::vector<int> neighbour_start;         // (nbody + 1) contact graph: body i's neighbours
     std::vector<int> neighbours;              // are neighbours[start[i] .. start[i + 1])
     std::vector<int> order;                   // connected bodies by level (breadth first)
-    std::vector<std::vector<int>> by_level;   // contacts by the level of their upper body
+    std::vector<int> contact_level;           // (ncontact) level of the upper body, -1 when
+                                              // not connected to the ground or a kinematic body
     std::vector<int> group;                   // (nbody) union-find of contact groups
     std::vector<char> thrown;                 // (nbody) group roots thrown off by the levels
   };
@@ -243,8 +264,8 @@ class World {
   void wake_island(int i);
   void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
   void update_candidate(int i);
-  void mark_stale(int i);
-  void refresh_stale_candidates();
+  void mark_stale(int i, ImpulseLog& log);
+  void refresh_stale_candidates(ImpulseLog& log);
   Vec3 point_velocity(int i, const Vec3& x) const;
   void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
   long long sweep_tests(int a, int b) const;
@@ -252,7 +273,7 @@ class World {
   bool samples_inside(int a, int b, double s, std::vector<Penetration>& out) const;
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
-  void exchange_impulse(const Penetration& p, const Vec3& J);
+  void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
   void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
@@ -261,7 +282,9 @@ class World {
   static void reduce_contact_points(std::vector<Penetration>& points);
   static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
-  bool apply_contact_impulse(ContactPoint& contact);
+  bool apply_contact_impulse(ContactPoint& contact, ImpulseLog& log);
+  void find_contact_islands();
+  void collect_impulses();
   void assign_contact_levels();
   bool check_finite() const;
 
@@ -277,7 +300,6 @@ class World {
                                             // stage uses at points (rad/s, world)
   std::vector<Mat3> inverse_inertia_;       // (nbody) world I^-1 at the start-of-step orientation
   std::vector<char> stale_;                 // (nbody) candidate behind the latest impulse
-  std::vector<int> stale_list_;             // the bodies marked stale since the last refresh
   std::vector<std::uint64_t> version_;      // (nbody) bumped whenever v, L or the candidate change
   std::vector<char> frozen_;                // (nbody) immovable for now (shock propagation)
   std::vector<int> level_;                  // (nbody) contact-graph distance from the ground or
@@ -298,6 +320,8 @@ class World {
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
   ShockScratch shock_;                      // reused by propagate_shocks
+  IslandScratch islands_;                   // this step's contact islands
+  ImpulseLog log_;                          // the serial stages' impulses
   GridScratch grid_;                        // reused by overlapping_pairs
   std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
   double dt_ = 0.0;                         // current substep (s)
