@@ -271,11 +271,11 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& lo
 // (a deterministic shuffle seeded by the step and sweep numbers) so that no body is always
 // served first.
 
-bool World::apply_collision_impulse(const Penetration& p, double restitution, double friction) {
+bool World::apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log) {
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
   if (v.dot(p.n) >= -settings_.contact_tolerance) return false;
-  exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction), log_);
-  refresh_stale_candidates(log_);
+  exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction), log);
+  refresh_stale_candidates(log);
   return true;
 }
 
@@ -326,43 +326,68 @@ void deterministic_shuffle(std::vector<int>& order, std::uint64_t seed) {
 
 void World::resolve_collisions(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/true, /*average_velocities=*/false);
-  std::vector<int> order(pairs_.size());
   // the first sweep runs the full narrow phase and remembers, per pair, every sample found
   // inside the other body; later sweeps re-test only those (the candidates move little within
   // a step, so a sample outside at the first sweep stays outside)
   std::vector<std::vector<Penetration>>& inside = pair_scratch_;
   find_pair_penetrations(inside);
+  // islands of the pairs with samples inside (the others have nothing to do), each swept on
+  // its own and in parallel as in resolve_contacts: an island whose sweep applies no impulse
+  // revisits no pair after it, so stopping it there gives the bits of the global sweeps
+  IslandScratch& islands = islands_;
+  islands.links.resize(pairs_.size());
+  for (std::size_t k = 0; k < pairs_.size(); ++k) {
+    islands.links[k] = inside[k].empty() ? std::array<int, 2>{-1, -1} : std::array<int, 2>{pairs_[k].a, pairs_[k].b};
+  }
+  find_islands();
+  // each sweep's order of the island's pairs: all pairs shuffled, then taken island by island
+  const int sweeps = settings_.collision_sweeps;
+  const int m = islands.item_start[islands.count];
+  std::vector<int>& order = islands.order;
+  std::vector<int>& by_sweep = islands.by_sweep;  // (sweeps x m)
+  order.resize(pairs_.size());
+  by_sweep.resize(static_cast<std::size_t>(sweeps) * m);
+  for (int sweep = 0; sweep < sweeps; ++sweep) {
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
+    deterministic_shuffle(order, static_cast<std::uint64_t>(stats_.substeps) * 64 + sweep);
+    islands.filled.assign(islands.item_start.begin(), islands.item_start.end() - 1);
+    for (int index : order) {
+      if (islands.of_item[index] >= 0) by_sweep[static_cast<std::size_t>(sweep) * m + islands.filled[islands.of_item[index]]++] = index;
+    }
+  }
   // sweep in which each body last took an impulse: after the first sweep only pairs with a
   // body that changed since the pair was last looked at can have anything new to offer
   std::vector<int>& changed = body_scratch_;
   changed.assign(body_count(), -1);
   auto changed_since = [&](int i, int sweep) { return i != kGround && changed[i] >= sweep - 1; };
-  for (int sweep = 0; sweep < settings_.collision_sweeps; ++sweep) {
-    for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
-    deterministic_shuffle(order, static_cast<std::uint64_t>(stats_.substeps) * 64 + sweep);
-    bool any = false;
-    for (int index : order) {
-      const BodyPair& pair = pairs_[index];
-      std::vector<Penetration>& found = inside[index];
-      if (sweep > 0 && !changed_since(pair.a, sweep) && !changed_since(pair.b, sweep)) continue;
-      // the deepest point still inside and approaching faster than the contact tolerance
-      const Penetration* deepest = nullptr;
-      for (Penetration& p : found) {
-        if (sweep > 0) refresh_contact(p);
-        if (p.phi >= -kTouching) continue;
-        const double approach = (point_velocity(p.a, p.x) - point_velocity(p.b, p.x)).dot(p.n);
-        if (approach >= -settings_.contact_tolerance) continue;
-        if (deepest == nullptr || p.phi < deepest->phi) deepest = &p;
+  tbb::parallel_for(0, islands.count, [&](int island) {
+    ImpulseLog& log = islands.logs[island];
+    for (int sweep = 0; sweep < sweeps; ++sweep) {
+      bool any = false;
+      for (int c = islands.item_start[island]; c < islands.item_start[island + 1]; ++c) {
+        const int index = by_sweep[static_cast<std::size_t>(sweep) * m + c];
+        const BodyPair& pair = pairs_[index];
+        std::vector<Penetration>& found = inside[index];
+        if (sweep > 0 && !changed_since(pair.a, sweep) && !changed_since(pair.b, sweep)) continue;
+        // the deepest point still inside and approaching faster than the contact tolerance
+        const Penetration* deepest = nullptr;
+        for (Penetration& p : found) {
+          if (sweep > 0) refresh_contact(p);
+          if (p.phi >= -kTouching) continue;
+          const double approach = (point_velocity(p.a, p.x) - point_velocity(p.b, p.x)).dot(p.n);
+          if (approach >= -settings_.contact_tolerance) continue;
+          if (deepest == nullptr || p.phi < deepest->phi) deepest = &p;
+        }
+        if (deepest == nullptr) continue;
+        const Penetration struck = struck_point(found, *deepest);
+        if (!apply_collision_impulse(struck, pair.restitution, pair.friction, log)) continue;
+        any = true;
+        changed[pair.a] = sweep;
+        if (pair.b != kGround) changed[pair.b] = sweep;
       }
-      if (deepest == nullptr) continue;
-      const Penetration struck = struck_point(found, *deepest);
-      if (!apply_collision_impulse(struck, pair.restitution, pair.friction)) continue;
-      any = true;
-      changed[pair.a] = sweep;
-      if (pair.b != kGround) changed[pair.b] = sweep;
+      if (!any) break;
     }
-    if (!any) break;
-  }
+  });
   collect_impulses();
 }
 
@@ -391,15 +416,17 @@ void World::update_velocities(double dt) {
 void World::resolve_contacts(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/false, /*average_velocities=*/true);
   find_contacts();
-  find_contact_islands();
+  islands_.links.resize(contacts_.size());
+  for (std::size_t k = 0; k < contacts_.size(); ++k) islands_.links[k] = {contacts_[k].point.a, contacts_[k].point.b};
+  find_islands();
   const IslandScratch& islands = islands_;
   tbb::parallel_for(0, islands.count, [&](int k) {
     ImpulseLog& log = islands_.logs[k];
     for (int sweep = 0; sweep < settings_.contact_sweeps; ++sweep) {
       refresh_stale_candidates(log);
       bool any = false;
-      for (int c = islands.contact_start[k]; c < islands.contact_start[k + 1]; ++c) {
-        any |= apply_contact_impulse(contacts_[islands.contacts[c]], log);
+      for (int c = islands.item_start[k]; c < islands.item_start[k + 1]; ++c) {
+        any |= apply_contact_impulse(contacts_[islands.items[c]], log);
       }
       if (!any) break;
     }
@@ -407,41 +434,50 @@ void World::resolve_contacts(double dt) {
   collect_impulses();
 }
 
-// The islands of this step's contacts, numbered in the order of their first contact, each
-// with its contacts in contact order; their logs start empty
-void World::find_contact_islands() {
+// The islands of islands_.links (item k links bodies a and b; a < 0: item k is in no
+// island), numbered in the order of their first item, each with its items in order; their
+// logs start empty
+void World::find_islands() {
   const int n = body_count();
   IslandScratch& islands = islands_;
+  const std::vector<std::array<int, 2>>& links = islands.links;
   std::vector<int>& parent = islands.parent;
   reset_sets(parent, n);
   auto root = [&](int i) { return set_root(parent, i); };
-  auto dynamic = [&](int i) { return i != kGround && !defs_[i].kinematic; };
-  for (const ContactPoint& c : contacts_) {
-    if (dynamic(c.point.a) && dynamic(c.point.b)) parent[root(c.point.a)] = root(c.point.b);
+  auto dynamic = [&](int i) { return i >= 0 && !defs_[i].kinematic; };
+  for (const auto& [a, b] : links) {
+    if (dynamic(a) && dynamic(b)) parent[root(a)] = root(b);
   }
-  // each contact's island is that of its dynamic body (a contact has one at least)
+  // each item's island is that of its dynamic body (a pair or contact has one at least)
   std::vector<int>& index = islands.index;
-  std::vector<int>& of_contact = islands.of_contact;
+  std::vector<int>& of_item = islands.of_item;
   index.assign(n, -1);
-  of_contact.resize(contacts_.size());
+  of_item.resize(links.size());
   islands.count = 0;
-  for (std::size_t k = 0; k < contacts_.size(); ++k) {
-    const int r = root(dynamic(contacts_[k].point.a) ? contacts_[k].point.a : contacts_[k].point.b);
+  for (std::size_t k = 0; k < links.size(); ++k) {
+    const auto& [a, b] = links[k];
+    of_item[k] = -1;
+    if (a < 0) continue;
+    const int r = root(dynamic(a) ? a : b);
     if (index[r] < 0) index[r] = islands.count++;
-    of_contact[k] = index[r];
+    of_item[k] = index[r];
   }
   std::vector<int>& of_body = islands.of_body;
   of_body.resize(n);
   for (int i = 0; i < n; ++i) of_body[i] = index[root(i)];
-  // contacts by island (a counting sort keeps their order)
-  std::vector<int>& start = islands.contact_start;
+  // items by island (a counting sort keeps their order)
+  std::vector<int>& start = islands.item_start;
   start.assign(islands.count + 1, 0);
-  for (int island : of_contact) ++start[island + 1];
+  for (int island : of_item) {
+    if (island >= 0) ++start[island + 1];
+  }
   std::partial_sum(start.begin(), start.end(), start.begin());
-  std::vector<int>& filled = body_scratch_;
+  std::vector<int>& filled = islands.filled;
   filled.assign(start.begin(), start.end() - 1);
-  islands.contacts.resize(contacts_.size());
-  for (std::size_t k = 0; k < contacts_.size(); ++k) islands.contacts[filled[of_contact[k]]++] = static_cast<int>(k);
+  islands.items.resize(start.back());
+  for (std::size_t k = 0; k < links.size(); ++k) {
+    if (of_item[k] >= 0) islands.items[filled[of_item[k]]++] = static_cast<int>(k);
+  }
   if (static_cast<int>(islands.logs.size()) < islands.count) islands.logs.resize(islands.count);
   for (int k = 0; k < islands.count; ++k) {
     islands.logs[k].stale.clear();
@@ -701,8 +737,8 @@ void World::propagate_shocks() {
     ImpulseLog& log = islands.logs[k];
     std::vector<int>& by_level = islands.by_level[k];
     by_level.clear();
-    for (int c = islands.contact_start[k]; c < islands.contact_start[k + 1]; ++c) {
-      if (contact_level[islands.contacts[c]] >= 0) by_level.push_back(islands.contacts[c]);
+    for (int c = islands.item_start[k]; c < islands.item_start[k + 1]; ++c) {
+      if (contact_level[islands.items[c]] >= 0) by_level.push_back(islands.items[c]);
     }
     std::stable_sort(by_level.begin(), by_level.end(),
                      [&](int l, int r) { return contact_level[l] < contact_level[r]; });

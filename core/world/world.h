@@ -194,15 +194,21 @@ class World {
     std::vector<int> stale;
     long long impulses = 0;
   };
-  // The islands of the contact stage (see resolve_contacts), rebuilt every step
+  // The islands of an impulse stage (see resolve_contacts), rebuilt by each stage from its
+  // items: the pairs with samples inside (collisions) or the contacts
   struct IslandScratch {
     int count = 0;
-    std::vector<int> parent;                  // (nbody) union-find through contacts
+    std::vector<std::array<int, 2>> links;    // (nitem) bodies of each item; -1: in no island
+    std::vector<int> parent;                  // (nbody) union-find through the links
     std::vector<int> index;                   // (nbody) island of a root body, else -1
-    std::vector<int> of_body;                 // (nbody) island of each body, -1 with no contact
-    std::vector<int> of_contact;              // (ncontact) island of each contact
-    std::vector<int> contact_start;           // (count + 1) island k's contacts are
-    std::vector<int> contacts;                //   contacts[contact_start[k] .. contact_start[k + 1])
+    std::vector<int> of_body;                 // (nbody) island of each body, -1 when unlinked
+    std::vector<int> of_item;                 // (nitem) island of each item, or -1
+    std::vector<int> item_start;              // (count + 1) island k's items are
+    std::vector<int> items;                   //   items[item_start[k] .. item_start[k + 1])
+    std::vector<int> filled;                  // (count) counting-sort cursors
+    std::vector<int> order;                   // (npair) collisions: a sweep's shuffled pairs
+    std::vector<int> by_sweep;                // (sweeps x nitem) collisions: island k's pairs
+                                              //   in sweep s at s nitem + item_start[k] ..
     std::vector<int> body_start;              // (count + 1) island k's bodies with a level,
     std::vector<int> bodies;                  //   by level, likewise (shock propagation)
     std::vector<std::vector<int>> by_level;   // (count) island k's contacts by level
@@ -274,7 +280,7 @@ class World {
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
-  bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
+  bool apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log);
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
   void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
   void find_contacts();
@@ -283,7 +289,7 @@ class World {
   static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact, ImpulseLog& log);
-  void find_contact_islands();
+  void find_islands();
   void collect_impulses();
   void assign_contact_levels();
   bool check_finite() const;
