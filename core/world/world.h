@@ -293,6 +293,7 @@ class World {
   void collect_impulses();
   void assign_contact_levels();
   bool check_finite() const;
+  double pair_penetration(const BodyPair& pair) const;
 
   WorldSettings settings_;
   std::optional<GroundDef> ground_;
