@@ -54,14 +54,15 @@ void World::begin_impulse_stage(double dt, bool with_forces, bool average_veloci
   dt_ = dt;
   candidates_with_forces_ = with_forces;
   average_velocities_ = average_velocities;
-  for (int i = 0; i < body_count(); ++i) {
-    if (asleep_[i]) continue;
+  // (each body on its own: in parallel)
+  tbb::parallel_for(0, body_count(), [&](int i) {
+    if (asleep_[i]) return;
     const RigidBodyDef& def = defs_[i];
     inverse_inertia_[i] = def.kinematic ? Mat3::Zero() : world_inverse_inertia(def, states_[i].q);
     if (def.kinematic) omega_[i] = spin_[i];
     else if (!average_velocities) omega_[i] = inverse_inertia_[i] * states_[i].l;
     update_candidate(i);
-  }
+  });
   log_.stale.clear();
 }
 
@@ -816,12 +817,12 @@ void World::update_positions(double dt) {
   dt_ = dt;
   candidates_with_forces_ = false;
   average_velocities_ = false;
-  for (int i = 0; i < body_count(); ++i) {
-    if (asleep_[i]) continue;
+  tbb::parallel_for(0, body_count(), [&](int i) {
+    if (asleep_[i]) return;
     update_candidate(i);
     states_[i].x = candidates_[i].x;
     states_[i].q = candidates_[i].q;
-  }
+  });
   log_.stale.clear();
 }
 
