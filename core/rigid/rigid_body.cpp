@@ -13,6 +13,7 @@ std::vector<SampleBlock> sample_blocks(const Points& samples) {
     for (Eigen::Index k = first; k < first + count; ++k) {
       block.radius = std::max(block.radius, (samples.row(k).transpose() - block.centre).norm());
     }
+    block.margin = block.radius + 1e-9 * (block.centre.norm() + block.radius);
     blocks.push_back(block);
   }
   return blocks;

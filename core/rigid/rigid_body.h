@@ -22,19 +22,21 @@ struct SampleBlock {
   static constexpr int kSize = 8;            // samples per block (the last may have fewer)
   Vec3 centre = Vec3::Zero();                // mesh coordinates (m)
   double radius = 0.0;                       // largest |sample - centre| (m)
+  double margin = 0.0;                       // radius plus the block's part of the slack (m)
 
   // Whether a sample of the block may lie within `reach` of `point`, or below the plane
-  // m.down + offset = 0 (m in mesh coordinates, down a unit vector). The slack, 1e-9 of the
-  // lengths involved and far above round-off, makes a skipped block one whose every sample
-  // the same test made sample by sample would also have rejected
-  bool may_reach(const Vec3& point, double reach) const {
-    const double slack = 1e-9 * (1.0 + centre.norm() + point.norm() + reach + radius);
-    const double far = reach + radius + slack;
+  // m.down + offset = 0 (m in mesh coordinates, down a unit vector). A slack of 1e-9 of the
+  // lengths involved, far above round-off, makes a skipped block one whose every sample the
+  // same test made sample by sample would also have rejected; the query's part of it is
+  // computed once per query (slackened), the block's part is in margin
+  static double slackened(const Vec3& point, double reach) { return reach + 1e-9 * (1.0 + point.norm() + reach); }
+  static double slackened(double offset) { return 1e-9 * (1.0 + std::abs(offset)); }
+  bool may_reach(const Vec3& point, double slackened_reach) const {
+    const double far = slackened_reach + margin;
     return (centre - point).squaredNorm() <= far * far;
   }
-  bool may_be_below(const Vec3& down, double offset) const {
-    const double slack = 1e-9 * (1.0 + centre.norm() + std::abs(offset) + radius);
-    return centre.dot(down) + offset < radius + slack;
+  bool may_be_below(const Vec3& down, double offset, double offset_slack) const {
+    return centre.dot(down) + offset < margin + offset_slack;
   }
 };
 

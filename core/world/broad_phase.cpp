@@ -212,8 +212,9 @@ bool World::touching(int mover, int sleeper, double dt) const {
     const Vec3 centre_inside = poses[k].apply_inverse(centres[1 - k]);
     const double radius = inside.bounding_radius * inside.bounding_radius;
     const std::vector<SampleBlock>& blocks = defs_[bodies[k]].sample_blocks;
+    const double slackened = SampleBlock::slackened(centre_inside, inside.bounding_radius);
     for (std::size_t block = 0; block < blocks.size(); ++block) {
-      if (!blocks[block].may_reach(centre_inside, inside.bounding_radius)) continue;
+      if (!blocks[block].may_reach(centre_inside, slackened)) continue;
       const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
       const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
       for (Eigen::Index s = first; s < end; ++s) {

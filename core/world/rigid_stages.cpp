@@ -197,9 +197,11 @@ bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out
   }
   // (whole blocks of samples first: most of a body's samples are far from the other)
   const std::vector<SampleBlock>& blocks = defs_[a].sample_blocks;
+  const double slackened = b == kGround ? SampleBlock::slackened(ground_offset)
+                                        : SampleBlock::slackened(centre_in_a, defs_[b].bounding_radius);
   for (std::size_t block = 0; block < blocks.size(); ++block) {
-    if (b == kGround ? !blocks[block].may_be_below(down_in_a, ground_offset)
-                     : !blocks[block].may_reach(centre_in_a, defs_[b].bounding_radius)) {
+    if (b == kGround ? !blocks[block].may_be_below(down_in_a, ground_offset, slackened)
+                     : !blocks[block].may_reach(centre_in_a, slackened)) {
       continue;
     }
     const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
