@@ -1,6 +1,23 @@
 #include "rigid/rigid_body.h"
 
+#include <algorithm>
+
 namespace simbake {
+
+std::vector<SampleBlock> sample_blocks(const Points& samples) {
+  std::vector<SampleBlock> blocks;
+  for (Eigen::Index first = 0; first < samples.rows(); first += SampleBlock::kSize) {
+    const Eigen::Index count = std::min<Eigen::Index>(SampleBlock::kSize, samples.rows() - first);
+    SampleBlock block;
+    block.centre = samples.middleRows(first, count).colwise().mean().transpose();
+    for (Eigen::Index k = first; k < first + count; ++k) {
+      block.radius = std::max(block.radius, (samples.row(k).transpose() - block.centre).norm());
+    }
+    block.margin = block.radius + 1e-9 * (block.centre.norm() + block.radius);
+    blocks.push_back(block);
+  }
+  return blocks;
+}
 
 Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state) {
   // a mesh point m sits at x + R(q) P^T (m - c): rotation R(q) P^T, translation x - R c

@@ -10,7 +10,38 @@
 
 #include "levelset/signed_distance.h"
 
+#include <cmath>
+#include <vector>
+
 namespace simbake {
+
+// Bounding sphere of a run of consecutive surface samples: a narrow phase that tests the
+// sphere first skips whole runs far from the other body, and still visits the samples it
+// keeps in their order
+struct SampleBlock {
+  static constexpr int kSize = 8;            // samples per block (the last may have fewer)
+  Vec3 centre = Vec3::Zero();                // mesh coordinates (m)
+  double radius = 0.0;                       // largest |sample - centre| (m)
+  double margin = 0.0;                       // radius plus the block's part of the slack (m)
+
+  // Whether a sample of the block may lie within `reach` of `point`, or below the plane
+  // m.down + offset = 0 (m in mesh coordinates, down a unit vector). A slack of 1e-9 of the
+  // lengths involved, far above round-off, makes a skipped block one whose every sample the
+  // same test made sample by sample would also have rejected; the query's part of it is
+  // computed once per query (slackened), the block's part is in margin
+  static double slackened(const Vec3& point, double reach) { return reach + 1e-9 * (1.0 + point.norm() + reach); }
+  static double slackened(double offset) { return 1e-9 * (1.0 + std::abs(offset)); }
+  bool may_reach(const Vec3& point, double slackened_reach) const {
+    const double far = slackened_reach + margin;
+    return (centre - point).squaredNorm() <= far * far;
+  }
+  bool may_be_below(const Vec3& down, double offset, double offset_slack) const {
+    return centre.dot(down) + offset < margin + offset_slack;
+  }
+};
+
+// The blocks of kSize consecutive samples, in sample order
+std::vector<SampleBlock> sample_blocks(const Points& samples);
 
 struct RigidBodyDef {
   double inverse_mass = 0.0;                 // (1/kg); 0 for kinematic bodies
@@ -24,6 +55,7 @@ struct RigidBodyDef {
   SignedDistancePtr shape;                   // signed distance in mesh coordinates; null when
                                              // nothing can touch the body (no grid baked)
   Points samples;                            // (s x 3) surface samples in mesh coordinates (m)
+  std::vector<SampleBlock> sample_blocks;    // (ceil(s / 8)) their bounding spheres, in order
   double bounding_radius = 0.0;              // largest |sample - center| (m)
   double thickness = 0.0;                    // smallest extent of the shape (m), for substeps
 };

@@ -2,9 +2,9 @@
 //
 // Broad phase. Each body's box holds its bounding sphere at the start of the step and at the
 // candidate with gravity, grown by a margin for what impulses may add during the step. Boxes
-// are swept and pruned along x (sorted by their lower x, an active list of boxes still open),
-// so the cost is O(n log n + pairs) rather than O(n^2). The pair list is sorted by index, so
-// the order in which later stages see pairs depends only on the scene.
+// are binned into a uniform grid (see overlapping_pairs), so the cost is O(n + pairs) rather
+// than O(n^2). The pair list is sorted by index, so the order in which later stages see
+// pairs depends only on the scene.
 //
 // Sleeping. Bodies are grouped into islands connected through this step's contact points
 // (the ground and kinematic bodies do not connect). A body is at rest while none of its points
@@ -54,24 +54,103 @@ void World::compute_boxes(double dt) {
   }
 }
 
-// Every pair of overlapping boxes (a < b), by sweep and prune along x
-void World::overlapping_pairs(std::vector<std::pair<int, int>>& out) const {
+// Every pair of overlapping boxes (a < b), sorted. The boxes are binned into a uniform grid
+// whose cells are as wide as the median box (its largest side), each box into every cell it
+// overlaps (a counting sort, no allocation once the scratch has grown); a pair is reported
+// by the one cell that holds the lower corner of the two boxes' intersection, so exactly
+// once. A box over more than kMaxCells cells (a platform, a body with a non-finite box) is
+// tested against every other box instead. For boxes of similar size the cost is
+// O(n + pairs); a sweep along one axis costs O(n x boxes open along it), which in a pile
+// spread over the ground is a large fraction of the pile.
+void World::overlapping_pairs(std::vector<std::pair<int, int>>& out) {
+  constexpr long long kMaxCells = 64;
   out.clear();
-  std::vector<int> order(body_count());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](int l, int r) {
-    return boxes_[l].min().x() < boxes_[r].min().x() || (boxes_[l].min().x() == boxes_[r].min().x() && l < r);
-  });
-  std::vector<int> active;
-  for (int i : order) {
-    const Box3& box = boxes_[i];
-    active.erase(std::remove_if(active.begin(), active.end(),
-                                [&](int j) { return boxes_[j].max().x() < box.min().x(); }),
-                 active.end());
-    for (int j : active) {
-      if (box.intersects(boxes_[j])) out.emplace_back(std::min(i, j), std::max(i, j));
+  const int n = body_count();
+  GridScratch& grid = grid_;
+  // cell width: the median of the boxes' largest sides; the grid over the finite boxes
+  std::vector<double>& sides = grid.sides;
+  sides.clear();
+  Box3 all;
+  for (int i = 0; i < n; ++i) {
+    if (!boxes_[i].min().allFinite() || !boxes_[i].max().allFinite()) continue;
+    sides.push_back(boxes_[i].sizes().maxCoeff());
+    all.extend(boxes_[i]);
+  }
+  double cell = 1.0;
+  if (!sides.empty()) {
+    std::nth_element(sides.begin(), sides.begin() + sides.size() / 2, sides.end());
+    cell = std::max(sides[sides.size() / 2], 1e-6 * all.sizes().maxCoeff());
+    if (!(cell > 0.0)) cell = 1.0;
+  }
+  // no more cells than a few per box: a scattered scene gets wider cells
+  const long long budget = 4LL * n + 64;
+  Eigen::Array<long long, 3, 1> dims;
+  for (;;) {
+    for (int k = 0; k < 3; ++k) {
+      dims[k] = sides.empty() ? 1 : static_cast<long long>(std::floor(all.sizes()[k] / cell)) + 1;
     }
-    active.push_back(i);
+    if (dims.prod() <= budget) break;
+    cell *= 2.0;
+  }
+  const Vec3 origin = sides.empty() ? Vec3::Zero() : all.min();
+  auto cell_of = [&](const Vec3& p) {
+    Eigen::Array<long long, 3, 1> c;
+    for (int k = 0; k < 3; ++k) {
+      c[k] = std::clamp(static_cast<long long>(std::floor((p[k] - origin[k]) / cell)), 0LL, dims[k] - 1);
+    }
+    return c;
+  };
+  auto index_of = [&](const Eigen::Array<long long, 3, 1>& c) { return (c[2] * dims[1] + c[1]) * dims[0] + c[0]; };
+  // each box's cell range; large boxes apart
+  std::vector<int>& large = grid.large;
+  std::vector<std::array<long long, 6>>& ranges = grid.ranges;
+  large.clear();
+  ranges.resize(n);
+  std::vector<int>& start = grid.cell_start;
+  start.assign(dims.prod() + 1, 0);
+  for (int i = 0; i < n; ++i) {
+    const Box3& box = boxes_[i];
+    const auto lo = cell_of(box.min()), hi = cell_of(box.max());
+    if (!box.min().allFinite() || !box.max().allFinite() || (hi - lo + 1).prod() > kMaxCells) {
+      large.push_back(i);
+      ranges[i][0] = -1;
+      continue;
+    }
+    ranges[i] = {lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]};
+    for (long long z = lo[2]; z <= hi[2]; ++z)
+      for (long long y = lo[1]; y <= hi[1]; ++y)
+        for (long long x = lo[0]; x <= hi[0]; ++x) ++start[index_of({x, y, z}) + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<int>& members = grid.members;
+  std::vector<int>& filled = body_scratch_;
+  members.resize(start.back());
+  filled.assign(start.begin(), start.end() - 1);
+  for (int i = 0; i < n; ++i) {
+    const auto& r = ranges[i];
+    if (r[0] < 0) continue;  // large
+    for (long long z = r[2]; z <= r[5]; ++z)
+      for (long long y = r[1]; y <= r[4]; ++y)
+        for (long long x = r[0]; x <= r[3]; ++x) members[filled[index_of({x, y, z})]++] = i;
+  }
+  // pairs within a cell, reported only by the cell of their intersection's lower corner
+  for (long long c = 0; c + 1 < static_cast<long long>(start.size()); ++c) {
+    for (int u = start[c]; u < start[c + 1]; ++u) {
+      for (int w = u + 1; w < start[c + 1]; ++w) {
+        const int i = members[u], j = members[w];
+        if (!boxes_[i].intersects(boxes_[j])) continue;
+        // (the cell of the larger of two lower corners is the larger of their cells)
+        const auto &ri = ranges[i], &rj = ranges[j];
+        if (index_of({std::max(ri[0], rj[0]), std::max(ri[1], rj[1]), std::max(ri[2], rj[2])}) != c) continue;
+        out.emplace_back(std::min(i, j), std::max(i, j));
+      }
+    }
+  }
+  for (int i : large) {
+    for (int j = 0; j < n; ++j) {
+      if (j == i || (ranges[j][0] < 0 && j < i)) continue;  // a pair of large boxes once
+      if (boxes_[i].intersects(boxes_[j])) out.emplace_back(std::min(i, j), std::max(i, j));
+    }
   }
   std::sort(out.begin(), out.end());
 }
@@ -120,15 +199,29 @@ bool World::touching(int mover, int sleeper, double dt) const {
     moved.x += dt * (moved.v + dt * settings_.gravity);
     moved.q = free_rotation(defs_[mover], moved.q, moved.l, dt);
   }
+  // a body lies within its bounding sphere: samples outside the other's cannot be inside it
+  const Vec3 centres[2] = {moved.x, states_[sleeper].x};
+  const double reach = defs_[mover].bounding_radius + defs_[sleeper].bounding_radius;
+  if ((centres[0] - centres[1]).squaredNorm() > reach * reach) return false;
   const Pose poses[2] = {mesh_pose(defs_[mover], moved), mesh_pose(defs_[sleeper], states_[sleeper])};
   const int bodies[2] = {mover, sleeper};
   for (int k = 0; k < 2; ++k) {
     const RigidBodyDef& inside = defs_[bodies[1 - k]];
     if (!inside.shape) continue;
     const Points& samples = defs_[bodies[k]].samples;
-    for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-      const Vec3 p = poses[1 - k].apply_inverse(poses[k].apply(samples.row(s).transpose()));
-      if (inside.shape->bounds().contains(p) && inside.shape->phi(p) < 0.0) return true;
+    const Vec3 centre_inside = poses[k].apply_inverse(centres[1 - k]);
+    const double radius = inside.bounding_radius * inside.bounding_radius;
+    const std::vector<SampleBlock>& blocks = defs_[bodies[k]].sample_blocks;
+    const double slackened = SampleBlock::slackened(centre_inside, inside.bounding_radius);
+    for (std::size_t block = 0; block < blocks.size(); ++block) {
+      if (!blocks[block].may_reach(centre_inside, slackened)) continue;
+      const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
+      const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
+      for (Eigen::Index s = first; s < end; ++s) {
+        if ((samples.row(s).transpose() - centre_inside).squaredNorm() > radius) continue;
+        const Vec3 p = poses[1 - k].apply_inverse(poses[k].apply(samples.row(s).transpose()));
+        if (inside.shape->bounds().contains(p) && inside.shape->phi(p) < 0.0) return true;
+      }
     }
   }
   return false;

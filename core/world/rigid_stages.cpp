@@ -35,6 +35,16 @@ namespace {
 constexpr double kTrustedDepth = 0.25;  // of the thinner body's thickness: deeper, the level
                                         // set's normal no longer points the way out
 constexpr double kImpactSpeed = 1.0;    // (m/s) slower approaches are settling, not impacts
+
+// Union-find over bodies: every body its own set, then the root of i's set (path halving)
+void reset_sets(std::vector<int>& parent, int n) {
+  parent.resize(n);
+  std::iota(parent.begin(), parent.end(), 0);
+}
+int set_root(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -44,14 +54,16 @@ void World::begin_impulse_stage(double dt, bool with_forces, bool average_veloci
   dt_ = dt;
   candidates_with_forces_ = with_forces;
   average_velocities_ = average_velocities;
-  for (int i = 0; i < body_count(); ++i) {
-    if (asleep_[i]) continue;
+  // (each body on its own: in parallel)
+  tbb::parallel_for(0, body_count(), [&](int i) {
+    if (asleep_[i]) return;
     const RigidBodyDef& def = defs_[i];
     inverse_inertia_[i] = def.kinematic ? Mat3::Zero() : world_inverse_inertia(def, states_[i].q);
     if (def.kinematic) omega_[i] = spin_[i];
     else if (!average_velocities) omega_[i] = inverse_inertia_[i] * states_[i].l;
     update_candidate(i);
-  }
+  });
+  log_.stale.clear();
 }
 
 void World::update_candidate(int i) {
@@ -74,10 +86,19 @@ void World::update_candidate(int i) {
   ++version_[i];
 }
 
-void World::refresh_stale_candidates() {
-  for (int i = 0; i < body_count(); ++i) {
+// Marks body i's candidate as behind its velocities; the log's list keeps the refresh in
+// proportion to the bodies that took impulses, not to the world
+void World::mark_stale(int i, ImpulseLog& log) {
+  if (!stale_[i]) log.stale.push_back(i);
+  stale_[i] = 1;
+}
+
+void World::refresh_stale_candidates(ImpulseLog& log) {
+  // (a body refreshed by a whole-world pass since it was listed is no longer stale)
+  for (int i : log.stale) {
     if (stale_[i]) update_candidate(i);
   }
+  log.stale.clear();
 }
 
 Vec3 World::point_velocity(int i, const Vec3& x) const {
@@ -174,27 +195,39 @@ bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out
     reach = defs_[b].bounding_radius * defs_[b].bounding_radius;
     local_bounds = defs_[b].shape->bounds();
   }
-  for (Eigen::Index k = 0; k < samples.rows(); ++k) {
-    const Vec3 m = samples.row(k).transpose();
-    double phi;
-    Vec3 n;
-    if (b == kGround) {
-      phi = m.dot(down_in_a) + ground_offset;
-      if (phi >= 0.0) continue;
-      n = Vec3::UnitY();
-    } else {
-      if ((m - centre_in_a).squaredNorm() > reach) continue;
-      const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
-      if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
-      Vec3 n_local;
-      phi = defs_[b].shape->phi_and_normal(p, n_local);
-      // within kTouching of the surface is touching, not penetrating: a sample lying exactly
-      // on another body's edge (an exactly aligned stack) would otherwise act, by round-off,
-      // with the side face's normal and push the stack sideways
-      if (phi >= -kTouching) continue;
-      n = pose_b.rotation * n_local;
+  // (whole blocks of samples first: most of a body's samples are far from the other)
+  const std::vector<SampleBlock>& blocks = defs_[a].sample_blocks;
+  const double slackened = b == kGround ? SampleBlock::slackened(ground_offset)
+                                        : SampleBlock::slackened(centre_in_a, defs_[b].bounding_radius);
+  for (std::size_t block = 0; block < blocks.size(); ++block) {
+    if (b == kGround ? !blocks[block].may_be_below(down_in_a, ground_offset, slackened)
+                     : !blocks[block].may_reach(centre_in_a, slackened)) {
+      continue;
     }
-    out.push_back({a, b, candidate_poses_[a].apply(m), n, phi, static_cast<int>(k), s});
+    const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
+    const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
+    for (Eigen::Index k = first; k < end; ++k) {
+      const Vec3 m = samples.row(k).transpose();
+      double phi;
+      Vec3 n;
+      if (b == kGround) {
+        phi = m.dot(down_in_a) + ground_offset;
+        if (phi >= 0.0) continue;
+        n = Vec3::UnitY();
+      } else {
+        if ((m - centre_in_a).squaredNorm() > reach) continue;
+        const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
+        if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
+        Vec3 n_local;
+        phi = defs_[b].shape->phi_and_normal(p, n_local);
+        // within kTouching of the surface is touching, not penetrating: a sample lying exactly
+        // on another body's edge (an exactly aligned stack) would otherwise act, by round-off,
+        // with the side face's normal and push the stack sideways
+        if (phi >= -kTouching) continue;
+        n = pose_b.rotation * n_local;
+      }
+      out.push_back({a, b, candidate_poses_[a].apply(m), n, phi, static_cast<int>(k), s});
+    }
   }
   return out.size() > before;
 }
@@ -218,7 +251,7 @@ Mat3 World::pair_impulse_matrix(const Penetration& p) const {
 // Body a takes J and body b takes -J, in linear and angular momentum; the stage's angular
 // velocity follows (exactly for start-of-step velocities, to first order for average ones)
 // and the candidate is marked stale
-void World::exchange_impulse(const Penetration& p, const Vec3& J) {
+void World::exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log) {
   double sign = 1.0;
   for (int i : {p.a, p.b}) {
     if (movable(i)) {
@@ -226,12 +259,12 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
       states_[i].v += sign * defs_[i].inverse_mass * J;
       states_[i].l += dl;
       omega_[i] += inverse_inertia_[i] * dl;
-      stale_[i] = 1;
+      mark_stale(i, log);
       ++version_[i];
     }
     sign = -1.0;
   }
-  ++stats_.impulses;
+  ++log.impulses;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -241,11 +274,11 @@ void World::exchange_impulse(const Penetration& p, const Vec3& J) {
 // (a deterministic shuffle seeded by the step and sweep numbers) so that no body is always
 // served first.
 
-bool World::apply_collision_impulse(const Penetration& p, double restitution, double friction) {
+bool World::apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log) {
   const Vec3 v = point_velocity(p.a, p.x) - point_velocity(p.b, p.x);
   if (v.dot(p.n) >= -settings_.contact_tolerance) return false;
-  exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction));
-  refresh_stale_candidates();
+  exchange_impulse(p, coulomb_impulse(pair_impulse_matrix(p), p.n, v, restitution, friction), log);
+  refresh_stale_candidates(log);
   return true;
 }
 
@@ -296,43 +329,69 @@ void deterministic_shuffle(std::vector<int>& order, std::uint64_t seed) {
 
 void World::resolve_collisions(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/true, /*average_velocities=*/false);
-  std::vector<int> order(pairs_.size());
   // the first sweep runs the full narrow phase and remembers, per pair, every sample found
   // inside the other body; later sweeps re-test only those (the candidates move little within
   // a step, so a sample outside at the first sweep stays outside)
   std::vector<std::vector<Penetration>>& inside = pair_scratch_;
   find_pair_penetrations(inside);
+  // islands of the pairs with samples inside (the others have nothing to do), each swept on
+  // its own and in parallel as in resolve_contacts: an island whose sweep applies no impulse
+  // revisits no pair after it, so stopping it there gives the bits of the global sweeps
+  IslandScratch& islands = islands_;
+  islands.links.resize(pairs_.size());
+  for (std::size_t k = 0; k < pairs_.size(); ++k) {
+    islands.links[k] = inside[k].empty() ? std::array<int, 2>{-1, -1} : std::array<int, 2>{pairs_[k].a, pairs_[k].b};
+  }
+  find_islands();
+  // each sweep's order of the island's pairs: all pairs shuffled, then taken island by island
+  const int sweeps = settings_.collision_sweeps;
+  const int m = islands.item_start[islands.count];
+  std::vector<int>& order = islands.order;
+  std::vector<int>& by_sweep = islands.by_sweep;  // (sweeps x m)
+  order.resize(pairs_.size());
+  by_sweep.resize(static_cast<std::size_t>(sweeps) * m);
+  for (int sweep = 0; sweep < sweeps; ++sweep) {
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
+    deterministic_shuffle(order, static_cast<std::uint64_t>(stats_.substeps) * 64 + sweep);
+    islands.filled.assign(islands.item_start.begin(), islands.item_start.end() - 1);
+    for (int index : order) {
+      if (islands.of_item[index] >= 0) by_sweep[static_cast<std::size_t>(sweep) * m + islands.filled[islands.of_item[index]]++] = index;
+    }
+  }
   // sweep in which each body last took an impulse: after the first sweep only pairs with a
   // body that changed since the pair was last looked at can have anything new to offer
   std::vector<int>& changed = body_scratch_;
   changed.assign(body_count(), -1);
   auto changed_since = [&](int i, int sweep) { return i != kGround && changed[i] >= sweep - 1; };
-  for (int sweep = 0; sweep < settings_.collision_sweeps; ++sweep) {
-    for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
-    deterministic_shuffle(order, static_cast<std::uint64_t>(stats_.substeps) * 64 + sweep);
-    bool any = false;
-    for (int index : order) {
-      const BodyPair& pair = pairs_[index];
-      std::vector<Penetration>& found = inside[index];
-      if (sweep > 0 && !changed_since(pair.a, sweep) && !changed_since(pair.b, sweep)) continue;
-      // the deepest point still inside and approaching faster than the contact tolerance
-      const Penetration* deepest = nullptr;
-      for (Penetration& p : found) {
-        if (sweep > 0) refresh_contact(p);
-        if (p.phi >= -kTouching) continue;
-        const double approach = (point_velocity(p.a, p.x) - point_velocity(p.b, p.x)).dot(p.n);
-        if (approach >= -settings_.contact_tolerance) continue;
-        if (deepest == nullptr || p.phi < deepest->phi) deepest = &p;
+  tbb::parallel_for(0, islands.count, [&](int island) {
+    ImpulseLog& log = islands.logs[island];
+    for (int sweep = 0; sweep < sweeps; ++sweep) {
+      bool any = false;
+      for (int c = islands.item_start[island]; c < islands.item_start[island + 1]; ++c) {
+        const int index = by_sweep[static_cast<std::size_t>(sweep) * m + c];
+        const BodyPair& pair = pairs_[index];
+        std::vector<Penetration>& found = inside[index];
+        if (sweep > 0 && !changed_since(pair.a, sweep) && !changed_since(pair.b, sweep)) continue;
+        // the deepest point still inside and approaching faster than the contact tolerance
+        const Penetration* deepest = nullptr;
+        for (Penetration& p : found) {
+          if (sweep > 0) refresh_contact(p);
+          if (p.phi >= -kTouching) continue;
+          const double approach = (point_velocity(p.a, p.x) - point_velocity(p.b, p.x)).dot(p.n);
+          if (approach >= -settings_.contact_tolerance) continue;
+          if (deepest == nullptr || p.phi < deepest->phi) deepest = &p;
+        }
+        if (deepest == nullptr) continue;
+        const Penetration struck = struck_point(found, *deepest);
+        if (!apply_collision_impulse(struck, pair.restitution, pair.friction, log)) continue;
+        any = true;
+        changed[pair.a] = sweep;
+        if (pair.b != kGround) changed[pair.b] = sweep;
       }
-      if (deepest == nullptr) continue;
-      const Penetration struck = struck_point(found, *deepest);
-      if (!apply_collision_impulse(struck, pair.restitution, pair.friction)) continue;
-      any = true;
-      changed[pair.a] = sweep;
-      if (pair.b != kGround) changed[pair.b] = sweep;
+      if (!any) break;
     }
-    if (!any) break;
-  }
+  });
+  collect_impulses();
 }
 
 // Velocities: gravity on every dynamic body (no torque: it acts at the centre of mass)
@@ -349,15 +408,83 @@ void World::update_velocities(double dt) {
 // re-evaluates every contact at the bodies' current candidates with average velocities,
 // until no impulse changes anything. (Points that only start to penetrate during the
 // sweeps are left to the next step's collision stage, which catches them with forces.)
+//
+// Islands. Bodies connected through contacts (the ground and kinematic bodies, which no
+// impulse moves, do not connect) form islands that share no movable body, so each island is
+// swept on its own, in parallel, its contacts in their order. An island whose sweep applies
+// no impulse is at its fixed point (every contact has seen its bodies as they are), so
+// stopping it there gives exactly the bits of sweeping every contact until none changes, on
+// any number of threads.
 
 void World::resolve_contacts(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/false, /*average_velocities=*/true);
   find_contacts();
-  for (int sweep = 0; sweep < settings_.contact_sweeps; ++sweep) {
-    refresh_stale_candidates();
-    bool any = false;
-    for (ContactPoint& contact : contacts_) any |= apply_contact_impulse(contact);
-    if (!any) break;
+  islands_.links.resize(contacts_.size());
+  for (std::size_t k = 0; k < contacts_.size(); ++k) islands_.links[k] = {contacts_[k].point.a, contacts_[k].point.b};
+  find_islands();
+  const IslandScratch& islands = islands_;
+  tbb::parallel_for(0, islands.count, [&](int k) {
+    ImpulseLog& log = islands_.logs[k];
+    for (int sweep = 0; sweep < settings_.contact_sweeps; ++sweep) {
+      refresh_stale_candidates(log);
+      bool any = false;
+      for (int c = islands.item_start[k]; c < islands.item_start[k + 1]; ++c) {
+        any |= apply_contact_impulse(contacts_[islands.items[c]], log);
+      }
+      if (!any) break;
+    }
+  });
+  collect_impulses();
+}
+
+// The islands of islands_.links (item k links bodies a and b; a < 0: item k is in no
+// island), numbered in the order of their first item, each with its items in order; their
+// logs start empty
+void World::find_islands() {
+  const int n = body_count();
+  IslandScratch& islands = islands_;
+  const std::vector<std::array<int, 2>>& links = islands.links;
+  std::vector<int>& parent = islands.parent;
+  reset_sets(parent, n);
+  auto root = [&](int i) { return set_root(parent, i); };
+  auto dynamic = [&](int i) { return i >= 0 && !defs_[i].kinematic; };
+  for (const auto& [a, b] : links) {
+    if (dynamic(a) && dynamic(b)) parent[root(a)] = root(b);
+  }
+  // each item's island is that of its dynamic body (a pair or contact has one at least)
+  std::vector<int>& index = islands.index;
+  std::vector<int>& of_item = islands.of_item;
+  index.assign(n, -1);
+  of_item.resize(links.size());
+  islands.count = 0;
+  for (std::size_t k = 0; k < links.size(); ++k) {
+    const auto& [a, b] = links[k];
+    of_item[k] = -1;
+    if (a < 0) continue;
+    const int r = root(dynamic(a) ? a : b);
+    if (index[r] < 0) index[r] = islands.count++;
+    of_item[k] = index[r];
+  }
+  std::vector<int>& of_body = islands.of_body;
+  of_body.resize(n);
+  for (int i = 0; i < n; ++i) of_body[i] = index[root(i)];
+  // items by island (a counting sort keeps their order)
+  std::vector<int>& start = islands.item_start;
+  start.assign(islands.count + 1, 0);
+  for (int island : of_item) {
+    if (island >= 0) ++start[island + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<int>& filled = islands.filled;
+  filled.assign(start.begin(), start.end() - 1);
+  islands.items.resize(start.back());
+  for (std::size_t k = 0; k < links.size(); ++k) {
+    if (of_item[k] >= 0) islands.items[filled[of_item[k]]++] = static_cast<int>(k);
+  }
+  if (static_cast<int>(islands.logs.size()) < islands.count) islands.logs.resize(islands.count);
+  for (int k = 0; k < islands.count; ++k) {
+    islands.logs[k].stale.clear();
+    islands.logs[k].impulses = 0;
   }
 }
 
@@ -485,7 +612,7 @@ void World::refresh_contact(Penetration& p) const {
 // by a hard impact, or gathered while a tall stack first settles, would stay for good. A point
 // whose bodies have not changed since it was last evaluated is skipped: the update would
 // give the same answer, so converged parts of a pile cost nothing more.
-bool World::apply_contact_impulse(ContactPoint& contact) {
+bool World::apply_contact_impulse(ContactPoint& contact, ImpulseLog& log) {
   Penetration& p = contact.point;
   const bool a_moves = movable(p.a), b_moves = movable(p.b);
   if (!a_moves && !b_moves) return false;
@@ -510,7 +637,7 @@ bool World::apply_contact_impulse(ContactPoint& contact) {
     return false;
   }
   contact.total = total;
-  exchange_impulse(p, change);
+  exchange_impulse(p, change, log);
   contact.seen_a = p.a == kGround ? 0 : version_[p.a];
   contact.seen_b = p.b == kGround ? 0 : version_[p.b];
   return true;
@@ -524,24 +651,41 @@ bool World::apply_contact_impulse(ContactPoint& contact) {
 // mass), so the bottom of a stack is settled first and then holds everything above it.
 // Bodies connected to nothing immovable keep the result of the sweeps.
 
+// Levels by breadth-first search; shock_.order lists the connected bodies level by level
 void World::assign_contact_levels() {
   const int n = body_count();
   std::fill(level_.begin(), level_.end(), -1);
-  std::vector<std::vector<int>> neighbours(n);
-  std::vector<int> queue;
+  // the contact graph between dynamic bodies, as adjacency lists in one array
+  std::vector<int>& start = shock_.neighbour_start;
+  std::vector<int>& neighbours = shock_.neighbours;
+  std::vector<int>& queue = shock_.order;
+  start.assign(n + 1, 0);
+  queue.clear();
+  auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
   for (const ContactPoint& c : contacts_) {
     const int a = c.point.a, b = c.point.b;
-    const bool a_fixed = defs_[a].kinematic, b_fixed = b == kGround || defs_[b].kinematic;
+    if (fixed(a) || fixed(b)) continue;
+    ++start[a + 1];
+    ++start[b + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  neighbours.resize(start[n]);
+  std::vector<int>& filled = body_scratch_;
+  filled.assign(start.begin(), start.end() - 1);
+  for (const ContactPoint& c : contacts_) {
+    const int a = c.point.a, b = c.point.b;
+    const bool a_fixed = fixed(a), b_fixed = fixed(b);
     if (b_fixed && !a_fixed && level_[a] < 0) { level_[a] = 0; queue.push_back(a); }
     if (a_fixed && !b_fixed && level_[b] < 0) { level_[b] = 0; queue.push_back(b); }
     if (!a_fixed && !b_fixed) {
-      neighbours[a].push_back(b);
-      neighbours[b].push_back(a);
+      neighbours[filled[a]++] = b;
+      neighbours[filled[b]++] = a;
     }
   }
   for (std::size_t head = 0; head < queue.size(); ++head) {
     const int i = queue[head];
-    for (int j : neighbours[i]) {
+    for (int k = start[i]; k < start[i + 1]; ++k) {
+      const int j = neighbours[k];
       if (level_[j] < 0) {
         level_[j] = level_[i] + 1;
         queue.push_back(j);
@@ -554,8 +698,12 @@ void World::propagate_shocks() {
   if (contacts_.empty()) return;
   // each body's velocities and fastest point speed |v| + |omega| r before the levels
   const int n = body_count();
-  std::vector<Vec3> v_before(n), l_before(n);
-  std::vector<double> speed_before(n);
+  std::vector<Vec3>& v_before = shock_.v_before;
+  std::vector<Vec3>& l_before = shock_.l_before;
+  std::vector<double>& speed_before = shock_.speed_before;
+  v_before.resize(n);
+  l_before.resize(n);
+  speed_before.resize(n);
   auto point_speed = [&](int i) {
     return states_[i].v.norm() + (inverse_inertia_[i] * states_[i].l).norm() * defs_[i].bounding_radius;
   };
@@ -566,36 +714,62 @@ void World::propagate_shocks() {
   }
   assign_contact_levels();
   // the ground and kinematic bodies sit below level 0; bodies connected to neither
-  // (level -1) keep the result of the sweeps
+  // (level -1) keep the result of the sweeps. A contact's level is that of its upper body
   auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
-  std::vector<std::vector<int>> by_level;  // contacts by the level of their upper body
+  std::vector<int>& contact_level = shock_.contact_level;
+  contact_level.resize(contacts_.size());
   for (std::size_t k = 0; k < contacts_.size(); ++k) {
     const int a = contacts_[k].point.a, b = contacts_[k].point.b;
-    if ((!fixed(a) && level_[a] < 0) || (!fixed(b) && level_[b] < 0)) continue;
-    const int level = std::max(fixed(a) ? -1 : level_[a], fixed(b) ? -1 : level_[b]);
-    if (level < 0) continue;
-    if (level >= static_cast<int>(by_level.size())) by_level.resize(level + 1);
-    by_level[level].push_back(static_cast<int>(k));
+    const bool connected = (fixed(a) || level_[a] >= 0) && (fixed(b) || level_[b] >= 0);
+    contact_level[k] = connected ? std::max(fixed(a) ? -1 : level_[a], fixed(b) ? -1 : level_[b]) : -1;
   }
-  for (std::size_t level = 0; level < by_level.size(); ++level) {
-    for (int sweep = 0; sweep < settings_.shock_sweeps; ++sweep) {
-      refresh_stale_candidates();
-      bool any = false;
-      for (int k : by_level[level]) any |= apply_contact_impulse(contacts_[k]);
-      if (!any) break;
+  // each island's levelled bodies, by level (shock_.order is sorted by level)
+  IslandScratch& islands = islands_;
+  std::vector<int>& body_start = islands.body_start;
+  body_start.assign(islands.count + 1, 0);
+  for (int i : shock_.order) ++body_start[islands.of_body[i] + 1];
+  std::partial_sum(body_start.begin(), body_start.end(), body_start.begin());
+  std::vector<int>& filled = body_scratch_;
+  filled.assign(body_start.begin(), body_start.end() - 1);
+  islands.bodies.resize(shock_.order.size());
+  for (int i : shock_.order) islands.bodies[filled[islands.of_body[i]]++] = i;
+  if (islands.by_level.size() < islands.logs.size()) islands.by_level.resize(islands.logs.size());
+  // islands in parallel (see resolve_contacts), levels in turn within each: every body of
+  // a level is frozen once the level is solved (a body of level l has a contact in level l)
+  tbb::parallel_for(0, islands.count, [&](int k) {
+    ImpulseLog& log = islands.logs[k];
+    std::vector<int>& by_level = islands.by_level[k];
+    by_level.clear();
+    for (int c = islands.item_start[k]; c < islands.item_start[k + 1]; ++c) {
+      if (contact_level[islands.items[c]] >= 0) by_level.push_back(islands.items[c]);
     }
-    // freezing changes the K of every contact of the body: its version changes too
-    for (int i = 0; i < body_count(); ++i) {
-      if (level_[i] == static_cast<int>(level)) {
-        frozen_[i] = 1;
-        ++version_[i];
+    std::stable_sort(by_level.begin(), by_level.end(),
+                     [&](int l, int r) { return contact_level[l] < contact_level[r]; });
+    int next = body_start[k];
+    for (std::size_t first = 0; first < by_level.size();) {
+      const int level = contact_level[by_level[first]];
+      std::size_t last = first;
+      while (last < by_level.size() && contact_level[by_level[last]] == level) ++last;
+      for (int sweep = 0; sweep < settings_.shock_sweeps; ++sweep) {
+        refresh_stale_candidates(log);
+        bool any = false;
+        for (std::size_t c = first; c < last; ++c) any |= apply_contact_impulse(contacts_[by_level[c]], log);
+        if (!any) break;
       }
+      // freezing changes the K of every contact of the body: its version changes too
+      for (; next < body_start[k + 1] && level_[islands.bodies[next]] == level; ++next) {
+        frozen_[islands.bodies[next]] = 1;
+        ++version_[islands.bodies[next]];
+      }
+      first = last;
     }
+    refresh_stale_candidates(log);
+  });
+  for (int i : shock_.order) {
+    if (!frozen_[i]) continue;
+    ++version_[i];
+    frozen_[i] = 0;
   }
-  for (int i = 0; i < body_count(); ++i) {
-    if (frozen_[i]) ++version_[i];
-  }
-  std::fill(frozen_.begin(), frozen_.end(), 0);
   // Frozen levels are infinite masses, and where deep overlaps give a body contacts that
   // push opposite ways (the level set's normal deep inside points to the nearest face, not
   // the separating one) the levels can throw it off at any speed. Shock propagation only
@@ -604,16 +778,14 @@ void World::propagate_shocks() {
   // to the sweeps' velocities (momentum exchanged in equal pairs, speeds the recovery caps).
   // Twice: a level may add the recovery of the level below to its own (the top of a tower
   // settling at 1/60 s substeps gains 0.5 m/s and more, and must keep it to stand)
-  std::vector<int> group(n);
-  std::iota(group.begin(), group.end(), 0);
-  auto root = [&](int i) {
-    while (group[i] != i) i = group[i] = group[group[i]];
-    return i;
-  };
+  std::vector<int>& group = shock_.group;
+  reset_sets(group, n);
+  auto root = [&](int i) { return set_root(group, i); };
   for (const ContactPoint& c : contacts_) {
     if (c.point.b != kGround) group[root(c.point.a)] = root(c.point.b);
   }
-  std::vector<char> thrown(n, 0);
+  std::vector<char>& thrown = shock_.thrown;
+  thrown.assign(n, 0);
   for (int i = 0; i < n; ++i) {
     if (movable(i) && point_speed(i) > speed_before[i] + 2.0 * settings_.max_recovery_speed) {
       thrown[root(i)] = 1;
@@ -623,10 +795,22 @@ void World::propagate_shocks() {
     if (!thrown[root(i)] || !movable(i)) continue;
     states_[i].v = v_before[i];
     states_[i].l = l_before[i];
-    stale_[i] = 1;
+    mark_stale(i, log_);
     ++version_[i];
   }
-  refresh_stale_candidates();
+  refresh_stale_candidates(log_);
+  collect_impulses();
+}
+
+// The impulses of the stage so far into the statistics (the logs' counts are summed after
+// the parallel part, so the total is the same on any number of threads)
+void World::collect_impulses() {
+  for (int k = 0; k < islands_.count; ++k) {
+    stats_.impulses += islands_.logs[k].impulses;
+    islands_.logs[k].impulses = 0;
+  }
+  stats_.impulses += log_.impulses;
+  log_.impulses = 0;
 }
 
 // Positions: x += dt v and the torque-free rotation with the final L (what the contact
@@ -635,12 +819,13 @@ void World::update_positions(double dt) {
   dt_ = dt;
   candidates_with_forces_ = false;
   average_velocities_ = false;
-  for (int i = 0; i < body_count(); ++i) {
-    if (asleep_[i]) continue;
+  tbb::parallel_for(0, body_count(), [&](int i) {
+    if (asleep_[i]) return;
     update_candidate(i);
     states_[i].x = candidates_[i].x;
     states_[i].q = candidates_[i].q;
-  }
+  });
+  log_.stale.clear();
 }
 
 }  // namespace simbake

@@ -5,6 +5,8 @@
 #include "world/scoped_timer.h"
 
 #include <Eigen/Eigenvalues>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -57,6 +59,7 @@ int World::add_body(const BodyDesc& desc) {
   def.restitution = desc.restitution;
   def.shape = desc.shape;
   def.samples = desc.samples;
+  def.sample_blocks = sample_blocks(def.samples);
   def.center = desc.unit_mass.center;
 
   // principal axes of the inertia tensor, as a proper rotation
@@ -253,7 +256,7 @@ int World::step_frame(double frame_dt, int substeps) {
   });
   {
     ScopedTimer timer(profile_.statistics);
-    gather_statistics();
+    arena.execute([&] { gather_statistics(); });
   }
   return n;
 }
@@ -317,24 +320,34 @@ void World::gather_statistics() {
 
 double World::max_penetration() const {
   // the pairs the last broad phase kept are the only ones that can touch (the boxes hold
-  // the whole step); every sample is tested in both directions at the current poses
+  // the whole step); every sample is tested in both directions at the current poses. Pairs
+  // in parallel: the maximum is the same in any order
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, pairs_.size()), 0.0,
+      [&](const tbb::blocked_range<std::size_t>& range, double deepest) {
+        for (std::size_t k = range.begin(); k < range.end(); ++k) deepest = std::max(deepest, pair_penetration(pairs_[k]));
+        return deepest;
+      },
+      [](double l, double r) { return std::max(l, r); });
+}
+
+// Deepest sample of either body of the pair inside the other (or the ground), now (m, >= 0)
+double World::pair_penetration(const BodyPair& pair) const {
   double deepest = 0.0;
-  for (const BodyPair& pair : pairs_) {
-    for (const auto& [a, b] : {std::pair{pair.a, pair.b}, std::pair{pair.b, pair.a}}) {
-      if (a == kGround || (b != kGround && !defs_[b].shape)) continue;
-      const Pose pose_a = mesh_pose(defs_[a], states_[a]);
-      const Pose pose_b = b == kGround ? Pose() : mesh_pose(defs_[b], states_[b]);
-      const Box3 bounds = b == kGround ? Box3() : defs_[b].shape->bounds();
-      const Points& samples = defs_[a].samples;
-      for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-        const Vec3 x = pose_a.apply(samples.row(s).transpose());
-        if (b == kGround) {
-          deepest = std::max(deepest, ground_->height - x.y());
-          continue;
-        }
-        const Vec3 p = pose_b.apply_inverse(x);
-        if (bounds.contains(p)) deepest = std::max(deepest, -defs_[b].shape->phi(p));
+  for (const auto& [a, b] : {std::pair{pair.a, pair.b}, std::pair{pair.b, pair.a}}) {
+    if (a == kGround || (b != kGround && !defs_[b].shape)) continue;
+    const Pose pose_a = mesh_pose(defs_[a], states_[a]);
+    const Pose pose_b = b == kGround ? Pose() : mesh_pose(defs_[b], states_[b]);
+    const Box3 bounds = b == kGround ? Box3() : defs_[b].shape->bounds();
+    const Points& samples = defs_[a].samples;
+    for (Eigen::Index s = 0; s < samples.rows(); ++s) {
+      const Vec3 x = pose_a.apply(samples.row(s).transpose());
+      if (b == kGround) {
+        deepest = std::max(deepest, ground_->height - x.y());
+        continue;
       }
+      const Vec3 p = pose_b.apply_inverse(x);
+      if (bounds.contains(p)) deepest = std::max(deepest, -defs_[b].shape->phi(p));
     }
   }
   return deepest;

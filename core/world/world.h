@@ -188,6 +188,53 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
+  // What impulses leave behind, per island (or per serial stage): the bodies whose
+  // candidates are stale, and how many impulses were applied
+  struct ImpulseLog {
+    std::vector<int> stale;
+    long long impulses = 0;
+  };
+  // The islands of an impulse stage (see resolve_contacts), rebuilt by each stage from its
+  // items: the pairs with samples inside (collisions) or the contacts
+  struct IslandScratch {
+    int count = 0;
+    std::vector<std::array<int, 2>> links;    // (nitem) bodies of each item; -1: in no island
+    std::vector<int> parent;                  // (nbody) union-find through the links
+    std::vector<int> index;                   // (nbody) island of a root body, else -1
+    std::vector<int> of_body;                 // (nbody) island of each body, -1 when unlinked
+    std::vector<int> of_item;                 // (nitem) island of each item, or -1
+    std::vector<int> item_start;              // (count + 1) island k's items are
+    std::vector<int> items;                   //   items[item_start[k] .. item_start[k + 1])
+    std::vector<int> filled;                  // (count) counting-sort cursors
+    std::vector<int> order;                   // (npair) collisions: a sweep's shuffled pairs
+    std::vector<int> by_sweep;                // (sweeps x nitem) collisions: island k's pairs
+                                              //   in sweep s at s nitem + item_start[k] ..
+    std::vector<int> body_start;              // (count + 1) island k's bodies with a level,
+    std::vector<int> bodies;                  //   by level, likewise (shock propagation)
+    std::vector<std::vector<int>> by_level;   // (count) island k's contacts by level
+    std::vector<ImpulseLog> logs;             // (count)
+  };
+  // per-step scratch of shock propagation, kept so that a step allocates nothing
+  struct ShockScratch {
+    std::vector<Vec3> v_before, l_before;     // (nbody) velocities before the levels
+    std::vector<double> speed_before;         // (nbody) fastest point speed before (m/s)
+    std::vector<int> neighbour_start;         // (nbody + 1) contact graph: body i's neighbours
+    std::vector<int> neighbours;              // are neighbours[start[i] .. start[i + 1])
+    std::vector<int> order;                   // connected bodies by level (breadth first)
+    std::vector<int> contact_level;           // (ncontact) level of the upper body, -1 when
+                                              // not connected to the ground or a kinematic body
+    std::vector<int> group;                   // (nbody) union-find of contact groups
+    std::vector<char> thrown;                 // (nbody) group roots thrown off by the levels
+  };
+  // scratch of the broad phase's grid (see overlapping_pairs)
+  struct GridScratch {
+    std::vector<double> sides;                  // largest side of each finite box (m)
+    std::vector<std::array<long long, 6>> ranges;  // (nbody) cells a box covers, lower and
+                                                // upper (x, y, z); lower x -1 for a large box
+    std::vector<int> large;                     // boxes tested against every other box
+    std::vector<int> cell_start;                // (ncell + 1) cell c holds
+    std::vector<int> members;                   // members[cell_start[c] .. cell_start[c + 1])
+  };
   // one substep of the rigid bodies (every stage but step_cloths)
   void step_bodies(double dt);
   // the automatic substeps and cloth steps of the next frame (see automatic_substeps)
@@ -215,7 +262,7 @@ class World {
   bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
   bool moving_kinematic(int i) const;
   void compute_boxes(double dt);
-  void overlapping_pairs(std::vector<std::pair<int, int>>& out) const;
+  void overlapping_pairs(std::vector<std::pair<int, int>>& out);
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
   double cloth_penetration() const;
@@ -223,7 +270,8 @@ class World {
   void wake_island(int i);
   void begin_impulse_stage(double dt, bool with_forces, bool average_velocities);
   void update_candidate(int i);
-  void refresh_stale_candidates();
+  void mark_stale(int i, ImpulseLog& log);
+  void refresh_stale_candidates(ImpulseLog& log);
   Vec3 point_velocity(int i, const Vec3& x) const;
   void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
   long long sweep_tests(int a, int b) const;
@@ -231,8 +279,8 @@ class World {
   bool samples_inside(int a, int b, double s, std::vector<Penetration>& out) const;
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
-  void exchange_impulse(const Penetration& p, const Vec3& J);
-  bool apply_collision_impulse(const Penetration& p, double restitution, double friction);
+  void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
+  bool apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log);
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
   void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
   void find_contacts();
@@ -240,9 +288,12 @@ class World {
   static void reduce_contact_points(std::vector<Penetration>& points);
   static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
-  bool apply_contact_impulse(ContactPoint& contact);
+  bool apply_contact_impulse(ContactPoint& contact, ImpulseLog& log);
+  void find_islands();
+  void collect_impulses();
   void assign_contact_levels();
   bool check_finite() const;
+  double pair_penetration(const BodyPair& pair) const;
 
   WorldSettings settings_;
   std::optional<GroundDef> ground_;
@@ -275,6 +326,10 @@ class World {
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
+  ShockScratch shock_;                      // reused by propagate_shocks
+  IslandScratch islands_;                   // this step's contact islands
+  ImpulseLog log_;                          // the serial stages' impulses
+  GridScratch grid_;                        // reused by overlapping_pairs
   std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
   double dt_ = 0.0;                         // current substep (s)
   double time_ = 0.0;                       // simulated time at the start of the step (s)
