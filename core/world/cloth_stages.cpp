@@ -43,6 +43,10 @@ int World::add_cloth(const ClothDesc& desc, double friction, double thickness, b
   }
   cloth_inverse_mass_.push_back(inverse_mass);
   cloth_edges_.push_back(unique_edges(cloth.triangles()));
+  double total = 0.0;
+  for (const auto& e : cloth_edges_.back()) total += (cloth.positions().row(e[1]) - cloth.positions().row(e[0])).norm();
+  cloth_mean_edge_.push_back(total / static_cast<double>(std::max<size_t>(1, cloth_edges_.back().size())));
+  cloth_grid_.emplace_back();
   cloth_self_.emplace_back();
   if (self_collision) cloth_self_.back().emplace(cloth.triangles(), cloth.vertex_count());
   return cloth_count() - 1;
@@ -112,6 +116,53 @@ void World::step_cloths(double dt) {
   }
 }
 
+// A box body's corners and points along its edges (a quarter of the cloth's mean edge apart)
+// against cloth c's triangles at their candidate positions (contact/body_features.h); each
+// contact goes to `contact` with the triangle's vertices and weights. The triangle grid is
+// built at the first box of the pass
+template <class Contact>
+bool World::collide_features(int c, int b, double dt, bool& grid_built, const Contact& contact) {
+  const auto* box = dynamic_cast<const BoxDistance*>(defs_[b].shape.get());
+  if (!box) return false;
+  const Cloth& cloth = cloths_[c];
+  const double h = cloth_thickness_[c], edge = cloth_mean_edge_[c];
+  const Triangles& triangles = cloth.triangles();
+  const auto candidate = [&](int k) {
+    return Vec3((cloth.positions().row(k) + dt * cloth.velocities().row(k)).transpose());
+  };
+  if (!grid_built) {
+    const Points x = cloth.positions() + dt * cloth.velocities();
+    cloth_grid_[c].build(x, triangles, edge, 2.0 * h);
+    grid_built = true;
+  }
+  std::vector<Vec3> points, normals;
+  box_edge_features(box->half(), 0.25 * edge, points, normals);
+  const Pose pose = mesh_pose(defs_[b], states_[b]);
+  std::vector<int> near;
+  bool touched = false;
+  for (size_t f = 0; f < points.size(); ++f) {
+    const Vec3 p = pose.apply(points[f]), nf = pose.rotation * normals[f];
+    cloth_grid_[c].query(p, near);
+    for (int t : near) {
+      const int ids[3] = {triangles(t, 0), triangles(t, 1), triangles(t, 2)};
+      Vec3 w, normal;
+      double phi;
+      if (!feature_against_triangle(p, nf, candidate(ids[0]), candidate(ids[1]), candidate(ids[2]), h, edge, w,
+                                    normal, phi)) {
+        continue;
+      }
+      // a plane behind the feature is the cloth pierced only if its point there is inside the
+      // body (not a layer on the body's far side)
+      const Vec3 xc = p + phi * normal;
+      if (phi < 0.0 && box->phi(pose.apply_inverse(xc)) >= 0.0) continue;
+      const double weights[3] = {w[0], w[1], w[2]};
+      contact(ids, weights, xc, normal, phi);
+      touched = true;
+    }
+  }
+  return touched;
+}
+
 void World::collide_cloth(int c, double dt) {
   ScopedTimer timer(profile_.cloth_contacts);
   Cloth& cloth = cloths_[c];
@@ -172,6 +223,7 @@ void World::collide_cloth(int c, double dt) {
     contact_point(&k, &one, 1, body, xc, normal, phi, mu);
   };
 
+  bool grid_built = false;
   for (int b = 0; b < body_count(); ++b) {
     const RigidBodyDef& def = defs_[b];
     if (!def.shape) continue;
@@ -213,6 +265,11 @@ void World::collide_cloth(int c, double dt) {
         touched = true;
       }
     }
+    // the body's corners and edges against the cloth's triangles
+    touched |= collide_features(c, b, dt, grid_built, [&](const int* ids, const double* w, const Vec3& xc,
+                                                         const Vec3& normal, double phi) {
+      contact_point(ids, w, 3, b, xc, normal, phi, mu);
+    });
     if (touched && asleep_[b]) wake_island(b);
   }
   if (ground_) {
