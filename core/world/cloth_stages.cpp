@@ -28,6 +28,7 @@ namespace simbake {
 namespace {
 constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
 constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
 }  // namespace
 
@@ -99,14 +100,22 @@ void World::step_cloths(double dt) {
       if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack))) break;
     }
     // the cloth against itself has the last word: repulsions (the last body contacts may have
-    // pressed layers into one plane) and collision impulses, strain limiting once more on what
-    // they stretched, then collisions again and rigid impact zones for what is left, so that
-    // nothing passes a layer through another
+    // pressed layers into one plane) and collision impulses; then strain limiting (all edges
+    // at once, converged) and collisions in turn, until the collisions find nothing ahead
+    // and leave no edge past the limit (their impulses alone stretched cloth_demo's edges
+    // to 13.7% after a converged limiter), and rigid impact zones for what is left, so that
+    // nothing passes a layer through another. Body contacts take no part in these rounds
+    // (with them the heap's landing strain went to 24-30% on branch cloth-contact)
     if (self) {
       repel();
       collide_self(1);
-      limit_strain(false);
-      if (!collide_self(2)) {
+      bool clear = false;
+      for (int round = 0; round < kFinalRounds; ++round) {
+        limit_strain(true);
+        clear = collide_self(2);
+        if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack))) break;
+      }
+      if (!clear) {
         ScopedTimer timer(profile_.cloth_self_collision);
         self->impact_zones(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
                            stats_.self_collision);
