@@ -18,6 +18,7 @@
 #include "world/world.h"
 
 #include "geometry/mesh.h"
+#include "rigid/impulse.h"
 #include "world/scoped_timer.h"
 
 #include <algorithm>
@@ -28,6 +29,8 @@ namespace simbake {
 namespace {
 constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
 constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its two surfaces apart per step
+constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
 constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
 }  // namespace
@@ -121,6 +124,7 @@ void World::step_cloths(double dt) {
                            stats_.self_collision);
       }
     }
+    hold_pinched_bodies(c, dt);
     cloth.update_positions(dt);
   }
 }
@@ -289,6 +293,144 @@ void World::collide_cloth(int c, double dt) {
       const double phi = xc.y() - ground_->height;
       if (phi < h) contact(k, -1, xc, Vec3::UnitY(), phi, mu);
     }
+  }
+}
+
+// Cloth pinched between two surfaces (two bodies, or a body and the ground): a vertex in
+// contact with one, whose gap to the other along the vertex is under 2h, cannot be pushed
+// out of either to h without going into the other (cloth_demo: the sheet falls into the
+// gap between a resting sphere and a box; the box's contacts, after the sphere's, left it
+// up to 12.7 mm inside the sphere), and its light vertices' momentum cannot push a heavy
+// body away. The rigid solver does not see the cloth, so here the pinch acts on the two
+// bodies as a rigid spacer of width 2h: Gauss-Seidel sweeps of equal and opposite impulses
+// (split below into a real and a pseudo part) at the vertex along n = (n_a - n_b) / |n_a - n_b| (n_a, n_b the surfaces' outward
+// normals), each bringing the bodies' relative velocity there, along n, to the speed that
+// opens the gap phi_a + phi_b to 2h over the step, at most kPinchSpeed (a deep start is
+// cleared over a few steps). Immovable surfaces (the ground, kinematic or sleeping bodies)
+// take nothing; a pinch between two of them is left alone.
+void World::hold_pinched_bodies(int c, double dt) {
+  ScopedTimer timer(profile_.cloth_contacts);
+  const Cloth& cloth = cloths_[c];
+  const Points& x = cloth.positions();
+  const Points& v = cloth.velocities();
+  const double h = cloth_thickness_[c];
+  const int n = cloth.vertex_count();
+  const auto movable_body = [&](int b) { return b >= 0 && !defs_[b].kinematic && !asleep_[b]; };
+  // the bodies the cloth may touch, and whether any of them can move
+  Box3 reach;
+  for (int k = 0; k < n; ++k) reach.extend(Vec3((x.row(k) + dt * v.row(k)).transpose()));
+  reach.min().array() -= h;
+  reach.max().array() += h;
+  std::vector<int> near;
+  bool any_movable = false;
+  for (int b = 0; b < body_count(); ++b) {
+    if (!defs_[b].shape) continue;
+    const Vec3 nearest = states_[b].x.cwiseMax(reach.min()).cwiseMin(reach.max());
+    if ((nearest - states_[b].x).norm() > defs_[b].bounding_radius + h) continue;
+    near.push_back(b);
+    any_movable = any_movable || movable_body(b);
+  }
+  if (!any_movable) return;
+  std::vector<Pose> poses;
+  for (int b : near) poses.push_back(mesh_pose(defs_[b], states_[b]));
+  struct Touch {
+    int body;  // kGround for the ground
+    Vec3 normal;
+    double phi;
+  };
+  struct Pinch {
+    Vec3 point;
+    int a, b;
+    Vec3 normal;  // from a towards b
+    double gap;   // phi_a + phi_b
+  };
+  std::vector<Pinch> pinches;
+  std::vector<Touch> touches;
+  for (int k = 0; k < n; ++k) {
+    if (cloth.pinned()[k]) continue;
+    const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+    touches.clear();
+    for (size_t i = 0; i < near.size(); ++i) {
+      const RigidBodyDef& def = defs_[near[i]];
+      const Vec3 p = poses[i].apply_inverse(xc);
+      Box3 local = def.shape->bounds();
+      local.min().array() -= 2.0 * h;
+      local.max().array() += 2.0 * h;
+      if (!local.contains(p)) continue;
+      Vec3 n_local;
+      const double phi = def.shape->phi_and_normal(p, n_local);
+      if (phi < 2.0 * h) touches.push_back({near[i], poses[i].rotation * n_local, phi});
+    }
+    if (touches.empty()) continue;
+    if (ground_ && xc.y() - ground_->height < 2.0 * h) {
+      touches.push_back({kGround, Vec3::UnitY(), xc.y() - ground_->height});
+    }
+    // a pair is a pinch where the vertex touches one (closer than h), the two surfaces face
+    // each other and the gap between them along the vertex is under 2h (pushed out of one to
+    // h, it would be inside the other's thickness)
+    for (size_t i = 0; i < touches.size(); ++i) {
+      for (size_t j = i + 1; j < touches.size(); ++j) {
+        const Touch& a = touches[i];
+        const Touch& b = touches[j];
+        if (!movable_body(a.body) && !movable_body(b.body)) continue;
+        if (std::min(a.phi, b.phi) >= h || a.phi + b.phi >= 2.0 * h || a.normal.dot(b.normal) >= 0.0) continue;
+        pinches.push_back({xc, a.body, b.body, (a.normal - b.normal).normalized(), a.phi + b.phi});
+      }
+    }
+  }
+  if (pinches.empty()) return;
+  // two parts (split impulses): a real one that stops the surfaces closing in on the
+  // vertex (inelastic: no bounce off the cloth), and a pseudo-velocity one, applied to the
+  // bodies' positions only, that opens the gap: a body is put in place, not thrown
+  std::vector<Vec3> pseudo_v(body_count(), Vec3::Zero()), pseudo_w(body_count(), Vec3::Zero());
+  std::vector<Mat3> inverse_inertia(body_count(), Mat3::Zero());
+  for (int b : near) {
+    if (movable_body(b)) inverse_inertia[b] = world_inverse_inertia(defs_[b], states_[b].q);
+  }
+  const auto velocity_at = [&](int b, const Vec3& p) -> Vec3 {
+    if (b < 0) return Vec3::Zero();
+    const Vec3 omega = defs_[b].kinematic ? spin_[b] : angular_velocity(defs_[b], states_[b]);
+    return states_[b].v + omega.cross(p - states_[b].x);
+  };
+  const auto pseudo_at = [&](int b, const Vec3& p) -> Vec3 {
+    return b < 0 ? Vec3::Zero() : Vec3(pseudo_v[b] + pseudo_w[b].cross(p - states_[b].x));
+  };
+  const auto k_normal = [&](const Pinch& pinch) {
+    Mat3 K = Mat3::Zero();
+    for (int b : {pinch.a, pinch.b}) {
+      if (movable_body(b)) K += impulse_matrix(defs_[b].inverse_mass, inverse_inertia[b], pinch.point - states_[b].x);
+    }
+    return pinch.normal.dot(K * pinch.normal);
+  };
+  std::vector<char> moved(body_count(), 0);
+  for (int sweep = 0; sweep < kPinchSweeps; ++sweep) {
+    for (const Pinch& pinch : pinches) {
+      const double kn = k_normal(pinch);
+      if (!(kn > 0.0)) continue;
+      // real: the surfaces stop closing in (relative normal velocity >= 0)
+      const double closing = -(velocity_at(pinch.b, pinch.point) - velocity_at(pinch.a, pinch.point)).dot(pinch.normal);
+      // pseudo: the gap opens to 2h over the step, at most kPinchSpeed
+      const double target = std::min((2.0 * h - pinch.gap) / dt, kPinchSpeed);
+      const double opening = (pseudo_at(pinch.b, pinch.point) - pseudo_at(pinch.a, pinch.point)).dot(pinch.normal);
+      const double real = std::max(0.0, closing) / kn, pseudo = std::max(0.0, target - opening) / kn;
+      if (real <= 0.0 && pseudo <= 0.0) continue;
+      for (const auto& [b, sign] : {std::pair<int, double>{pinch.b, 1.0}, std::pair<int, double>{pinch.a, -1.0}}) {
+        if (!movable_body(b)) continue;
+        const Vec3 r = pinch.point - states_[b].x;
+        const Vec3 J = sign * real * pinch.normal, P = sign * pseudo * pinch.normal;  // to body b
+        states_[b].v += defs_[b].inverse_mass * J;
+        states_[b].l += r.cross(J);
+        pseudo_v[b] += defs_[b].inverse_mass * P;
+        pseudo_w[b] += inverse_inertia[b] * r.cross(P);
+        moved[b] = 1;
+      }
+    }
+  }
+  for (int b : near) {
+    if (!moved[b]) continue;
+    states_[b].x += dt * pseudo_v[b];
+    states_[b].q = prescribed_rotation(states_[b].q, pseudo_w[b], dt);
+    ++version_[b];
   }
 }
 

@@ -222,6 +222,7 @@ class World {
   // a box's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
   template <class Contact>
   bool collide_features(int c, int b, double dt, bool& grid_built, const Contact& contact);
+  void hold_pinched_bodies(int c, double dt);
   double cloth_penetration() const;
   int find_island(int i);
   void wake_island(int i);
