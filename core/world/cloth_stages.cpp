@@ -13,8 +13,11 @@
 // (Bridson, Fedkiw and Anderson 2002): v_T <- max(0, 1 - mu dv_n / |v_T|) v_T. An edge
 // point's change is shared by its two vertices in proportion to their weights and inverse
 // masses. The cloth's momentum change goes, opposite, to a dynamic body at the contact point,
-// so cloth pushes bodies back. Strain limiting, contacts and self-collision then alternate
-// (see step_cloths), self-collision last, then positions.
+// so cloth pushes bodies back. A box's corners and points along its edges are held out of
+// the cloth's triangles the same way (contact/body_features.h), so that no box edge pokes
+// through the inside of a triangle. Strain limiting, contacts and self-collision then
+// alternate (see step_cloths), then strain limiting and self-collision in rounds, then a
+// cloth pinched between two surfaces holds them apart (hold_pinched_bodies), then positions.
 #include "world/world.h"
 
 #include "geometry/mesh.h"
@@ -30,6 +33,7 @@ namespace {
 constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
 constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
 constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its two surfaces apart per step
+constexpr double kPinchGap = 3.0;          // x h: the gap a pinch holds open
 constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
 constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
@@ -297,17 +301,21 @@ void World::collide_cloth(int c, double dt) {
 }
 
 // Cloth pinched between two surfaces (two bodies, or a body and the ground): a vertex in
-// contact with one, whose gap to the other along the vertex is under 2h, cannot be pushed
-// out of either to h without going into the other (cloth_demo: the sheet falls into the
-// gap between a resting sphere and a box; the box's contacts, after the sphere's, left it
-// up to 12.7 mm inside the sphere), and its light vertices' momentum cannot push a heavy
-// body away. The rigid solver does not see the cloth, so here the pinch acts on the two
-// bodies as a rigid spacer of width 2h: Gauss-Seidel sweeps of equal and opposite impulses
-// (split below into a real and a pseudo part) at the vertex along n = (n_a - n_b) / |n_a - n_b| (n_a, n_b the surfaces' outward
-// normals), each bringing the bodies' relative velocity there, along n, to the speed that
-// opens the gap phi_a + phi_b to 2h over the step, at most kPinchSpeed (a deep start is
+// contact with one, whose gap to the other along the vertex is under kPinchGap h, cannot
+// be pushed out of either without going into the other or into a layer of itself
+// (cloth_demo: the sheet falls, folded, into the gap between a resting sphere and a box;
+// the box's contacts, after the sphere's, and self-collision's last word left it up to
+// 12.7 mm inside the sphere), and its light vertices' momentum cannot push a heavy body
+// away. The rigid solver does not see the cloth, so here the pinch acts on the two bodies
+// as a rigid spacer of width kPinchGap h (3h: h from each surface and h between two layers,
+// as where the sheet folds into the gap; a 2h spacer, one layer, left 3.5 mm): Gauss-Seidel
+// sweeps of equal and opposite impulses (split below into a real and a pseudo part) at the
+// vertex along n = (n_a - n_b) / |n_a - n_b| (n_a, n_b the surfaces' outward normals),
+// each bringing the bodies' relative velocity there, along n, to the speed that opens the
+// gap phi_a + phi_b to kPinchGap h over the step, at most kPinchSpeed (a deep start is
 // cleared over a few steps). Immovable surfaces (the ground, kinematic or sleeping bodies)
-// take nothing; a pinch between two of them is left alone.
+// take nothing; a pinch between two of them is left alone. A dynamic body resting on cloth
+// on the ground so rests 3h above the ground.
 void World::hold_pinched_bodies(int c, double dt) {
   ScopedTimer timer(profile_.cloth_contacts);
   const Cloth& cloth = cloths_[c];
@@ -354,15 +362,15 @@ void World::hold_pinched_bodies(int c, double dt) {
       const RigidBodyDef& def = defs_[near[i]];
       const Vec3 p = poses[i].apply_inverse(xc);
       Box3 local = def.shape->bounds();
-      local.min().array() -= 2.0 * h;
-      local.max().array() += 2.0 * h;
+      local.min().array() -= kPinchGap * h;
+      local.max().array() += kPinchGap * h;
       if (!local.contains(p)) continue;
       Vec3 n_local;
       const double phi = def.shape->phi_and_normal(p, n_local);
-      if (phi < 2.0 * h) touches.push_back({near[i], poses[i].rotation * n_local, phi});
+      if (phi < kPinchGap * h) touches.push_back({near[i], poses[i].rotation * n_local, phi});
     }
     if (touches.empty()) continue;
-    if (ground_ && xc.y() - ground_->height < 2.0 * h) {
+    if (ground_ && xc.y() - ground_->height < kPinchGap * h) {
       touches.push_back({kGround, Vec3::UnitY(), xc.y() - ground_->height});
     }
     // a pair is a pinch where the vertex touches one (closer than h), the two surfaces face
@@ -373,7 +381,7 @@ void World::hold_pinched_bodies(int c, double dt) {
         const Touch& a = touches[i];
         const Touch& b = touches[j];
         if (!movable_body(a.body) && !movable_body(b.body)) continue;
-        if (std::min(a.phi, b.phi) >= h || a.phi + b.phi >= 2.0 * h || a.normal.dot(b.normal) >= 0.0) continue;
+        if (std::min(a.phi, b.phi) >= h || a.phi + b.phi >= kPinchGap * h || a.normal.dot(b.normal) >= 0.0) continue;
         pinches.push_back({xc, a.body, b.body, (a.normal - b.normal).normalized(), a.phi + b.phi});
       }
     }
@@ -410,7 +418,7 @@ void World::hold_pinched_bodies(int c, double dt) {
       // real: the surfaces stop closing in (relative normal velocity >= 0)
       const double closing = -(velocity_at(pinch.b, pinch.point) - velocity_at(pinch.a, pinch.point)).dot(pinch.normal);
       // pseudo: the gap opens to 2h over the step, at most kPinchSpeed
-      const double target = std::min((2.0 * h - pinch.gap) / dt, kPinchSpeed);
+      const double target = std::min((kPinchGap * h - pinch.gap) / dt, kPinchSpeed);
       const double opening = (pseudo_at(pinch.b, pinch.point) - pseudo_at(pinch.a, pinch.point)).dot(pinch.normal);
       const double real = std::max(0.0, closing) / kn, pseudo = std::max(0.0, target - opening) / kn;
       if (real <= 0.0 && pseudo <= 0.0) continue;

@@ -41,9 +41,7 @@ DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
 # (scene, check) pairs that fail today, each a limitation in the README: the test then
 # reports them as an expected failure (with the frames and figures) instead of passing;
 # layers through layers are never excused
-KNOWN_GAPS = {
-    ("cloth_demo", "inside"),     # up to 3.5 mm into a resting sphere (body2), pinched against a box (frames 30-34)
-}
+KNOWN_GAPS: set = set()
 
 
 def candidate_pairs(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
