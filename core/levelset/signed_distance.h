@@ -44,6 +44,7 @@ class BoxDistance final : public SignedDistance {
   double phi(const Vec3& p) const override;
   double phi_and_normal(const Vec3& p, Vec3& normal) const override;
   Box3 bounds() const override;
+  const Vec3& half() const { return half_; }  // half edge lengths (m)
 
  private:
   Vec3 half_;  // half edge lengths (m)

@@ -25,6 +25,7 @@
 
 #include "cloth/cloth.h"
 #include "cloth/self_collision.h"
+#include "contact/body_features.h"
 #include "geometry/mass_properties.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
@@ -265,6 +266,10 @@ class World {
   void overlapping_pairs(std::vector<std::pair<int, int>>& out);
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
+  // a box's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
+  template <class Contact>
+  bool collide_features(int c, int b, double dt, bool& grid_built, const Contact& contact);
+  void hold_pinched_bodies(int c, double dt);
   double cloth_penetration() const;
   int find_island(int i);
   void wake_island(int i);
@@ -323,6 +328,8 @@ class World {
   std::vector<std::optional<SelfCollision>> cloth_self_;  // (ncloth) self-collision, when on
   std::vector<Eigen::VectorXd> cloth_inverse_mass_;       // (ncloth) (nvert) 1/kg, 0 when pinned
   std::vector<std::vector<std::array<int, 2>>> cloth_edges_;  // (ncloth) (nedge) vertex pairs, i < j
+  std::vector<double> cloth_mean_edge_;                   // (ncloth) mean rest edge length (m)
+  std::vector<TriangleGrid> cloth_grid_;                  // (ncloth) scratch: its triangles at the candidate positions
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages

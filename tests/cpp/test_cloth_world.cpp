@@ -182,3 +182,25 @@ TEST(ClothWorld, EdgesRestOnAThinRodBetweenVertices) {
   const double top = 0.5 * (x(0, 1) + x(1, 1));
   EXPECT_GT(top, 1.01);
 }
+
+// A heavy box set down on a cloth lying on the ground: the cloth pinched between them holds
+// the box up as a spacer of 3 thicknesses (cloth_stages.cpp: hold_pinched_bodies), instead of the
+// box sinking through the cloth onto the ground; the cloth stays out of both
+TEST(ClothWorld, PinchedClothHoldsAHeavyBoxOffTheGround) {
+  World world;
+  world.set_ground(GroundDef{0.0, 0.5, 0.0});
+  const double h = 0.005;
+  world.add_cloth(square_cloth(1.0, 21, Vec3(0.0, h, 0.0)), 0.4, h);
+  world.add_body(box_body(Vec3::Constant(0.4), 20.0, Vec3(0.0, 0.2 + 3.0 * h, 0.0)));
+  double deepest = 0.0;
+  for (int f = 0; f < 24; ++f) {
+    world.step_frame(1.0 / 24.0);
+    deepest = std::max(deepest, world.statistics().cloth_penetration);
+  }
+  const double bottom = world.body_state(0).x.y() - 0.2;
+  std::printf("  pinched: box bottom %.2f mm above the ground, cloth %.3f mm deep at most\n", 1000 * bottom, 1000 * deepest);
+  EXPECT_GT(bottom, 2.0 * h);
+  EXPECT_LT(bottom, 4.0 * h);
+  EXPECT_LT(deepest, 0.5e-3);
+  EXPECT_LT(world.body_state(0).v.norm(), 0.05);
+}

@@ -45,16 +45,7 @@ DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
 # (scene, check) pairs that fail today, each a limitation in the README: the test then
 # reports them as an expected failure (with the frames and figures) instead of passing;
 # layers through layers are never excused
-KNOWN_GAPS = {
-    ("tablecloth", "strain"),     # up to 10.2% over the table's edge (frames 6-12)
-    ("tablecloth", "through"),    # the table's edges through 3-6 cloth triangles
-    ("cape_on_mover", "strain"),  # up to 10.3% as the mover turns (frames 8-49)
-    ("cape_on_mover", "through"), # the mover's edges through 3-6 cloth triangles (every frame from 8)
-    ("cloth_demo", "strain"),     # 10.2% as bodies land on the cloth (frame 46)
-    ("cloth_demo", "inside"),     # up to 11.7 mm into a sphere (body2) as it lands (frames 29-36)
-    ("cloth_demo", "through"),    # box edges through 3-19 cloth triangles once they rest on it
-    ("heap", "strain"),           # up to 15.5% as the pile lands (frames 11-22)
-}
+KNOWN_GAPS: set = set()
 
 
 def mesh_edges(triangles: np.ndarray) -> np.ndarray:
