@@ -418,7 +418,7 @@ void World::hold_pinched_bodies(int c, double dt) {
       if (!(kn > 0.0)) continue;
       // real: the surfaces stop closing in (relative normal velocity >= 0)
       const double closing = -(velocity_at(pinch.b, pinch.point) - velocity_at(pinch.a, pinch.point)).dot(pinch.normal);
-      // pseudo: the gap opens to 2h over the step, at most kPinchSpeed
+      // pseudo: the gap opens to kPinchGap h over the step, at most kPinchSpeed
       const double target = std::min((kPinchGap * h - pinch.gap) / dt, kPinchSpeed);
       const double opening = (pseudo_at(pinch.b, pinch.point) - pseudo_at(pinch.a, pinch.point)).dot(pinch.normal);
       const double real = std::max(0.0, closing) / kn, pseudo = std::max(0.0, target - opening) / kn;
