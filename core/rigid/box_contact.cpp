@@ -88,19 +88,41 @@ void closest_points(const Vec3& p, const Vec3& d, double hp, const Vec3& q, cons
   on_q = q + t * e;
 }
 
+// The overlap of the boxes' projections on unit axis L (negative: apart by that much)
+double projected_overlap(const OrientedBox& a, const OrientedBox& b, const Vec3& L) {
+  double ra = 0.0, rb = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    ra += a.half[k] * std::abs(L.dot(a.rotation.col(k)));
+    rb += b.half[k] * std::abs(L.dot(b.rotation.col(k)));
+  }
+  return ra + rb - std::abs(L.dot(b.center - a.center));
+}
+
 }  // namespace
+
+bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& out) {
+  const auto* box = dynamic_cast<const BoxDistance*>(shape);
+  if (!box) return false;
+  out = {pose.translation, pose.rotation, box->half()};
+  return true;
+}
+
+double box_overlap_depth(const OrientedBox& a, const OrientedBox& b) {
+  double depth = INFINITY;
+  for (int i = 0; i < 3; ++i) {
+    depth = std::min({depth, projected_overlap(a, b, a.rotation.col(i)), projected_overlap(a, b, b.rotation.col(i))});
+    for (int j = 0; j < 3; ++j) {
+      const Vec3 L = a.rotation.col(i).cross(b.rotation.col(j));
+      const double length = L.norm();
+      if (length >= kParallel) depth = std::min(depth, projected_overlap(a, b, L / length));
+    }
+  }
+  return std::max(depth, 0.0);
+}
 
 bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out) {
   const Vec3 d = b.center - a.center;
-  // the overlap of the boxes' projections on unit axis L (negative: apart)
-  const auto overlap = [&](const Vec3& L) {
-    double ra = 0.0, rb = 0.0;
-    for (int k = 0; k < 3; ++k) {
-      ra += a.half[k] * std::abs(L.dot(a.rotation.col(k)));
-      rb += b.half[k] * std::abs(L.dot(b.rotation.col(k)));
-    }
-    return ra + rb - std::abs(L.dot(d));
-  };
+  const auto overlap = [&](const Vec3& L) { return projected_overlap(a, b, L); };
 
   // face axes: 0-2 of a, 3-5 of b
   double best_face = INFINITY;

@@ -16,7 +16,9 @@
 // tolerance), so that a box resting on another keeps a face contact from step to step.
 #pragma once
 
+#include "levelset/signed_distance.h"
 #include "math/types.h"
+#include "rigid/rigid_body.h"
 
 #include <array>
 
@@ -44,5 +46,13 @@ struct BoxContact {
 // The contact of box a with box b when they overlap or are apart by less than `margin` (m);
 // false when they are farther apart. Points closer than `margin` outside count (depth < 0).
 bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out);
+
+// How deep the boxes overlap: the least overlap of their projections on the 15 axes (the
+// shortest translation that separates them), 0 when apart (m)
+double box_overlap_depth(const OrientedBox& a, const OrientedBox& b);
+
+// The box of a box shape (BoxDistance, centred at its mesh origin) at a mesh pose; false for
+// any other shape
+bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& out);
 
 }  // namespace simbake

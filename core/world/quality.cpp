@@ -1,6 +1,7 @@
 #include "world/quality.h"
 
 #include "geometry/triangle_intersection.h"
+#include "rigid/box_contact.h"
 
 #include <algorithm>
 #include <numeric>
@@ -25,6 +26,11 @@ void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses
   for (Eigen::Index s = 0; s < samples.rows(); ++s) {
     const Vec3 p = poses[b].apply_inverse(poses[a].apply(samples.row(s).transpose()));
     if (bounds.contains(p)) offer(deepest, -def_b.shape->phi(p), a, b);
+  }
+  // two boxes: also edges crossing between the samples (the separating axes' depth)
+  OrientedBox box_a, box_b;
+  if (oriented_box(w.body_def(a).shape.get(), poses[a], box_a) && oriented_box(def_b.shape.get(), poses[b], box_b)) {
+    offer(deepest, box_overlap_depth(box_a, box_b), a, b);
   }
 }
 

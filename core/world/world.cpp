@@ -2,6 +2,7 @@
 // The stages themselves are in rigid_stages.cpp.
 #include "world/world.h"
 
+#include "rigid/box_contact.h"
 #include "world/scoped_timer.h"
 
 #include <Eigen/Eigenvalues>
@@ -349,6 +350,12 @@ double World::pair_penetration(const BodyPair& pair) const {
       const Vec3 p = pose_b.apply_inverse(x);
       if (bounds.contains(p)) deepest = std::max(deepest, -defs_[b].shape->phi(p));
     }
+  }
+  // two boxes: also edges crossing between the samples (the separating axes' depth)
+  OrientedBox box_a, box_b;
+  if (pair.b != kGround && oriented_box(defs_[pair.a].shape.get(), mesh_pose(defs_[pair.a], states_[pair.a]), box_a) &&
+      oriented_box(defs_[pair.b].shape.get(), mesh_pose(defs_[pair.b], states_[pair.b]), box_b)) {
+    deepest = std::max(deepest, box_overlap_depth(box_a, box_b));
   }
   return deepest;
 }

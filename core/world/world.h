@@ -170,7 +170,8 @@ class World {
     Vec3 x;      // world position of the sample (m)
     Vec3 n;      // unit normal of b's level set at x, world, pointing towards a
     double phi;  // b's signed distance at x (m), negative
-    int sample;  // index of the sample in a's samples
+    Vec3 local;  // the point in a's mesh frame: a surface sample, or the deepest point of a
+                 // box's edge crossing another box's edge (see box_edge_crossing)
     double s = 1.0;  // fraction of the step at which x, n and phi were taken (1: the candidates;
                      // less for a fast pair, see sweep_tests); x is then where the sample is
                      // at the candidates, so that lever arms are from the candidate centres
@@ -282,6 +283,7 @@ class World {
   long long sweep_tests(int a, int b) const;
   Pose pose_at(int i, double s) const;
   bool samples_inside(int a, int b, double s, std::vector<Penetration>& out) const;
+  bool box_edge_crossing(int a, int b, double s, std::vector<Penetration>& out) const;
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
