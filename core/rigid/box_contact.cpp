@@ -135,6 +135,7 @@ bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, 
   }
   double best_edge = INFINITY;
   int edge_i = -1, edge_j = -1;
+  double edge_sine = 0.0;
   Vec3 edge_axis = Vec3::Zero();
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
@@ -144,7 +145,7 @@ bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, 
       L /= length;
       const double o = overlap(L);
       if (o < -margin) return false;
-      if (o < best_edge) best_edge = o, edge_i = i, edge_j = j, edge_axis = L;
+      if (o < best_edge) best_edge = o, edge_i = i, edge_j = j, edge_axis = L, edge_sine = length;
     }
   }
 
@@ -162,6 +163,7 @@ bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, 
     out.normal = n;
     out.depth = best_edge;
     out.edge_edge = true;
+    out.edge_sine = edge_sine;
     out.points[0] = {on_a, best_edge};
     out.count = 1;
     return true;

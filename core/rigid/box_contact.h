@@ -38,7 +38,8 @@ struct BoxContactPoint {
 struct BoxContact {
   Vec3 normal = Vec3::Zero();  // unit, world, from box b towards box a
   double depth = 0.0;          // overlap along the normal (m): the separating-axis depth
-  bool edge_edge = false;      // the normal is a cross product of two edges
+  bool edge_edge = false;      // the normal is a cross product of two edges ...
+  double edge_sine = 0.0;      // ... whose angle has this sine (0: parallel)
   int count = 0;               // points used
   std::array<BoxContactPoint, 8> points;
 };

@@ -175,6 +175,12 @@ class World {
     double s = 1.0;  // fraction of the step at which x, n and phi were taken (1: the candidates;
                      // less for a fast pair, see sweep_tests); x is then where the sample is
                      // at the candidates, so that lever arms are from the candidate centres
+    // an edge crossing an edge (see box_edge_crossing): the point of b's edge nearest a's,
+    // in b's mesh frame, and the normal in b's frame; phi is then the separation of the two
+    // points along the normal, not b's level set
+    bool crossing = false;
+    Vec3 local_b = Vec3::Zero();
+    Vec3 normal_b = Vec3::Zero();
   };
   // A contact point of the contact stage, found when the stage begins
   struct ContactPoint {
