@@ -98,6 +98,58 @@ double projected_overlap(const OrientedBox& a, const OrientedBox& b, const Vec3&
   return ra + rb - std::abs(L.dot(b.center - a.center));
 }
 
+// The 15 candidate axes of two boxes: the shallowest face axis and the shallowest edge axis
+struct AxisSearch {
+  double best_face = INFINITY;
+  int face = -1;                 // 0-2: a's axes, 3-5: b's
+  double best_edge = INFINITY;
+  int edge_i = -1, edge_j = -1;  // a's and b's edge directions
+  double edge_sine = 0.0;        // |a_i x b_j|
+  Vec3 edge_axis = Vec3::Zero();
+  bool edge_preferred() const { return edge_i >= 0 && best_edge < kEdgePreference * best_face - kEdgeSlack; }
+};
+
+// false as soon as an axis separates the boxes by more than `margin`
+bool search_axes(const OrientedBox& a, const OrientedBox& b, double margin, AxisSearch& out) {
+  for (int k = 0; k < 6; ++k) {
+    const double o = projected_overlap(a, b, k < 3 ? a.rotation.col(k) : b.rotation.col(k - 3));
+    if (o < -margin) return false;
+    if (o < out.best_face) out.best_face = o, out.face = k;
+  }
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      Vec3 L = a.rotation.col(i).cross(b.rotation.col(j));
+      const double length = L.norm();
+      if (length < kParallel) continue;
+      L /= length;
+      const double o = projected_overlap(a, b, L);
+      if (o < -margin) return false;
+      if (o < out.best_edge) out.best_edge = o, out.edge_i = i, out.edge_j = j, out.edge_axis = L, out.edge_sine = length;
+    }
+  }
+  return true;
+}
+
+// edge against edge: the edge of a farthest towards b and the edge of b farthest towards a,
+// their closest points
+void edge_contact(const OrientedBox& a, const OrientedBox& b, const AxisSearch& axes, BoxContact& out) {
+  const Vec3 n = -sign_of(axes.edge_axis.dot(b.center - a.center)) * axes.edge_axis;   // from b towards a
+  Vec3 pa = a.center, pb = b.center;
+  for (int k = 0; k < 3; ++k) {
+    if (k != axes.edge_i) pa -= sign_of(a.rotation.col(k).dot(n)) * a.half[k] * a.rotation.col(k);
+    if (k != axes.edge_j) pb += sign_of(b.rotation.col(k).dot(n)) * b.half[k] * b.rotation.col(k);
+  }
+  Vec3 on_a, on_b;
+  closest_points(pa, a.rotation.col(axes.edge_i), a.half[axes.edge_i], pb, b.rotation.col(axes.edge_j),
+                 b.half[axes.edge_j], on_a, on_b);
+  out.normal = n;
+  out.depth = axes.best_edge;
+  out.edge_edge = true;
+  out.edge_sine = axes.edge_sine;
+  out.points[0] = {on_a, axes.best_edge};
+  out.count = 1;
+}
+
 }  // namespace
 
 bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& out) {
@@ -108,67 +160,29 @@ bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& ou
 }
 
 double box_overlap_depth(const OrientedBox& a, const OrientedBox& b) {
-  double depth = INFINITY;
-  for (int i = 0; i < 3; ++i) {
-    depth = std::min({depth, projected_overlap(a, b, a.rotation.col(i)), projected_overlap(a, b, b.rotation.col(i))});
-    for (int j = 0; j < 3; ++j) {
-      const Vec3 L = a.rotation.col(i).cross(b.rotation.col(j));
-      const double length = L.norm();
-      if (length >= kParallel) depth = std::min(depth, projected_overlap(a, b, L / length));
-    }
-  }
-  return std::max(depth, 0.0);
+  AxisSearch axes;
+  if (!search_axes(a, b, 0.0, axes)) return 0.0;
+  return std::max(std::min(axes.best_face, axes.best_edge), 0.0);
+}
+
+bool box_edge_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out) {
+  AxisSearch axes;
+  if (!search_axes(a, b, margin, axes) || !axes.edge_preferred()) return false;
+  edge_contact(a, b, axes, out);
+  return true;
 }
 
 bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out) {
-  const Vec3 d = b.center - a.center;
-  const auto overlap = [&](const Vec3& L) { return projected_overlap(a, b, L); };
-
-  // face axes: 0-2 of a, 3-5 of b
-  double best_face = INFINITY;
-  int face = -1;
-  for (int k = 0; k < 6; ++k) {
-    const Vec3 L = k < 3 ? a.rotation.col(k) : b.rotation.col(k - 3);
-    const double o = overlap(L);
-    if (o < -margin) return false;
-    if (o < best_face) best_face = o, face = k;
-  }
-  double best_edge = INFINITY;
-  int edge_i = -1, edge_j = -1;
-  double edge_sine = 0.0;
-  Vec3 edge_axis = Vec3::Zero();
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      Vec3 L = a.rotation.col(i).cross(b.rotation.col(j));
-      const double length = L.norm();
-      if (length < kParallel) continue;
-      L /= length;
-      const double o = overlap(L);
-      if (o < -margin) return false;
-      if (o < best_edge) best_edge = o, edge_i = i, edge_j = j, edge_axis = L, edge_sine = length;
-    }
-  }
-
+  AxisSearch axes;
+  if (!search_axes(a, b, margin, axes)) return false;
   out.count = 0;
-  if (edge_i >= 0 && best_edge < kEdgePreference * best_face - kEdgeSlack) {
-    // edge against edge: the edge of a farthest towards b and the edge of b farthest towards a
-    const Vec3 n = -sign_of(edge_axis.dot(d)) * edge_axis;   // from b towards a
-    Vec3 pa = a.center, pb = b.center;
-    for (int k = 0; k < 3; ++k) {
-      if (k != edge_i) pa -= sign_of(a.rotation.col(k).dot(n)) * a.half[k] * a.rotation.col(k);
-      if (k != edge_j) pb += sign_of(b.rotation.col(k).dot(n)) * b.half[k] * b.rotation.col(k);
-    }
-    Vec3 on_a, on_b;
-    closest_points(pa, a.rotation.col(edge_i), a.half[edge_i], pb, b.rotation.col(edge_j), b.half[edge_j], on_a, on_b);
-    out.normal = n;
-    out.depth = best_edge;
-    out.edge_edge = true;
-    out.edge_sine = edge_sine;
-    out.points[0] = {on_a, best_edge};
-    out.count = 1;
+  if (axes.edge_preferred()) {
+    edge_contact(a, b, axes, out);
     return true;
   }
-
+  const int face = axes.face;
+  const double best_face = axes.best_face;
+  const Vec3 d = b.center - a.center;
   std::array<Vec3, 8> points;
   std::array<double, 8> depths;
   int count = 0;

@@ -48,6 +48,10 @@ struct BoxContact {
 // false when they are farther apart. Points closer than `margin` outside count (depth < 0).
 bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out);
 
+// The same when that contact is an edge against an edge; false otherwise, without clipping
+// any face (the narrow phase asks this of every pair of boxes)
+bool box_edge_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out);
+
 // How deep the boxes overlap: the least overlap of their projections on the 15 axes (the
 // shortest translation that separates them), 0 when apart (m)
 double box_overlap_depth(const OrientedBox& a, const OrientedBox& b);

@@ -253,7 +253,7 @@ bool World::box_edge_crossing(int a, int b, double s, std::vector<Penetration>& 
   OrientedBox box_a, box_b;
   BoxContact contact;
   if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b) ||
-      !box_box_contact(box_a, box_b, 0.0, contact) || !contact.edge_edge || contact.edge_sine < kCrossingSine) {
+      !box_edge_contact(box_a, box_b, 0.0, contact) || contact.edge_sine < kCrossingSine) {
     return false;
   }
   if (contact.depth <= kTouching) return false;

@@ -140,6 +140,10 @@ TEST(BoxContact, RandomPairsAgreeWithIndependentChecks) {
     ASSERT_TRUE(touching) << trial;
     ++tested;
     edges += ab.edge_edge;
+    // the edge-only query answers the same, and only for edge contacts
+    BoxContact edge;
+    ASSERT_EQ(box_edge_contact(a, b, 0.0, edge), ab.edge_edge) << trial;
+    if (ab.edge_edge) EXPECT_EQ((edge.points[0].x - ab.points[0].x).norm(), 0.0);
     ASSERT_TRUE(box_box_contact(b, a, 0.0, ba));
     // the depth is the least overlap, or (a face preferred) within 5% of it
     EXPECT_GE(ab.depth, depth - 1e-12);
