@@ -352,6 +352,8 @@ PYBIND11_MODULE(_core, m) {
              d["cloth_held_still"] = s.self_collision.stills;
              d["self_collision_searches"] = s.self_collision.searches;
              d["self_collision_candidates"] = s.self_collision.candidates;
+             d["self_collision_updates"] = s.self_collision.updates;
+             d["self_collision_tests"] = s.self_collision.tests;
              return d;
            })
       .def("quality", [](const World& w) {

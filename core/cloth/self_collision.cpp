@@ -6,8 +6,10 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 
 namespace simbake {
@@ -18,8 +20,10 @@ constexpr double kRepulsionRate = 0.1;      // a pair closer than h separates by
 constexpr double kCollisionTolerance = 1e-2; // of h: coplanar pairs this close count as colliding
 constexpr double kSeparation = 1e-3;        // of h per step: the separating speed a collision impulse leaves
 constexpr long long kMaxCells = 4096;       // a query over more grid cells scans every item
-constexpr double kMargin = 0.1;             // of the mean edge: how far motions may drift before
-                                            // the candidate pairs are found again
+constexpr double kMargin = 0.1;             // of the mean edge: how far a vertex's box reaches past
+                                            // its start and end of the step
+constexpr size_t kFullSearch = 8;           // the pairs are all found again when more than 1 / 8 of the
+                                            // vertices leave their boxes at once
 constexpr size_t kChunk = 512;              // pairs per parallel task (fixed: same result at any thread count)
 
 Vec3 row(const Points& p, int k) { return p.row(k).transpose(); }
@@ -164,17 +168,6 @@ void coplanarity_cubic(const Vec3 x[4], const Vec3 d[4], double coef[4]) {
   coef[3] = A.dot(x3);
 }
 
-Box3 swept_box(const Points& x, const Points& v, double dt, const int* vertices, int count, double pad) {
-  Box3 box;
-  for (int k = 0; k < count; ++k) {
-    box.extend(row(x, vertices[k]));
-    box.extend(row(x, vertices[k]) + dt * row(v, vertices[k]));
-  }
-  box.min().array() -= pad;
-  box.max().array() += pad;
-  return box;
-}
-
 // Applies an impulse along the contact's normal that brings the pair's relative normal
 // velocity up to `target` (never down), with Coulomb friction on the relative slip limited
 // by the same change; returns whether it did anything
@@ -220,123 +213,203 @@ void parallel_collect(size_t count, std::vector<T>& out, ForEach&& for_each) {
 
 }  // namespace
 
-// A uniform grid over boxes, each item entered once, in the cell of its box's centre; the
-// cell is as large as the largest box (at most 4 x the median box: larger boxes, of fast
-// vertices, are kept aside and offered to every query). A box meets a query's box only if
-// its centre lies within half a cell of it, so a query scans the cells there and visits each
-// item at most once; queries share nothing and may run in parallel.
+// Uniform grids over boxes, each item entered once, in the cell of its box's centre, in the
+// first of a few levels whose cell is as large as its box along each axis. A level's cell is
+// as large as the largest of its items along each axis, its items those no more than 4 x the
+// median extent of the items left for it along every axis (the rest go on to the next level:
+// a cloth half stopped on a body and half still falling has the falling part's long boxes
+// in a level of their own). A box meets a query's box only if its centre lies within half a
+// cell of it, so a query scans the cells there, in every level, and visits each item at most
+// once; queries share nothing and may run in parallel. A cell is found through a hash table
+// of a level's non-empty cells; each level keeps its own copy of its items' boxes, in cell
+// order.
 class SelfCollision::Grid {
  public:
-  explicit Grid(const std::vector<Box3>& boxes) : boxes_(boxes) {
-    const int n = static_cast<int>(boxes.size());
-    std::vector<double> extents(n);
-    for (int i = 0; i < n; ++i) extents[i] = (boxes[i].max() - boxes[i].min()).maxCoeff();
-    std::vector<double> sorted = extents;
-    if (n > 0) std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
-    const double median = n > 0 ? sorted[n / 2] : 1.0;
-    cell_ = 0.0;
-    for (double e : extents) {
-      if (e <= 4.0 * median) cell_ = std::max(cell_, e);
+  explicit Grid(const std::vector<Box3>& boxes) {
+    std::vector<int> left(boxes.size());
+    std::iota(left.begin(), left.end(), 0);
+    for (int level = 0; level < kLevels && !left.empty(); ++level) {
+      levels_.emplace_back(boxes, left, level + 1 == kLevels);
     }
-    if (!(cell_ > 0.0 && std::isfinite(cell_))) cell_ = std::isfinite(median) && median > 0.0 ? median : 1.0;
-    entries_.reserve(n);
-    for (int i = 0; i < n; ++i) {
-      Cell c;
-      if (!(extents[i] <= cell_) || !cell_of(boxes[i].center(), c)) {
-        large_.push_back(i);
-        continue;
-      }
-      entries_.emplace_back(key(c), i);
-    }
-    std::sort(entries_.begin(), entries_.end());
   }
 
-  // visit(i, j), i < j, once for every pair of the grid's own items whose boxes meet: each
-  // cell against itself and its 13 neighbours ahead of it (centres of meeting boxes lie at
-  // most a cell apart), cells in parallel in fixed chunks, the pairs in cell order
-  template <class Visit>
-  void self_pairs(std::vector<std::pair<int, int>>& out, Visit&& keep) const {
-    std::vector<size_t> starts;  // first entry of each non-empty cell
-    for (size_t e = 0; e < entries_.size(); ++e) {
-      if (e == 0 || entries_[e].first != entries_[e - 1].first) starts.push_back(e);
-    }
-    starts.push_back(entries_.size());
-    static const int ahead[13][3] = {{1, 0, 0},  {-1, 1, 0}, {0, 1, 0},  {1, 1, 0},  {-1, -1, 1},
-                                     {0, -1, 1}, {1, -1, 1}, {-1, 0, 1}, {0, 0, 1},  {1, 0, 1},
-                                     {-1, 1, 1}, {0, 1, 1},  {1, 1, 1}};
-    const auto offer = [&](int i, int j, std::vector<std::pair<int, int>>& found) {
-      if (boxes_[i].intersects(boxes_[j]) && keep(std::min(i, j), std::max(i, j))) {
-        found.emplace_back(std::min(i, j), std::max(i, j));
-      }
+  // visit(i, j), i < j, once for every pair of the grid's items whose boxes meet: in each
+  // level, each cell against itself and its 13 neighbours ahead of it (centres of meeting
+  // boxes lie at most a cell apart), cells in parallel in fixed chunks, the pairs in cell
+  // order; then each item of a level against the levels before it
+  template <class Keep>
+  void self_pairs(std::vector<std::pair<int, int>>& out, Keep&& keep) const {
+    const auto offer = [&](int a, int b, std::vector<std::pair<int, int>>& found) {
+      const int i = std::min(a, b), j = std::max(a, b);
+      if (keep(i, j)) found.emplace_back(i, j);
     };
-    parallel_collect(starts.size() - 1, out, [&](size_t k, std::vector<std::pair<int, int>>& found) {
-      const size_t begin = starts[k], end = starts[k + 1];
-      for (size_t p = begin; p < end; ++p)
-        for (size_t q = p + 1; q < end; ++q) offer(entries_[p].second, entries_[q].second, found);
-      const Cell here = unkey(entries_[begin].first);
-      for (const auto& d : ahead) {
-        const Cell there{here[0] + d[0], here[1] + d[1], here[2] + d[2]};
-        auto it = std::lower_bound(entries_.begin(), entries_.end(), std::make_pair(key(there), -1));
-        for (; it != entries_.end() && it->first == key(there); ++it)
-          for (size_t p = begin; p < end; ++p) offer(entries_[p].second, it->second, found);
-      }
-    });
-    // items kept aside against everything (a pair of two of them once)
-    for (size_t a = 0; a < large_.size(); ++a) {
-      const int i = large_[a];
-      for (int j = 0; j < static_cast<int>(boxes_.size()); ++j) {
-        const bool also_large = std::binary_search(large_.begin(), large_.end(), j);
-        if (j == i || (also_large && j < i)) continue;
-        offer(i, j, out);
-      }
+    for (size_t l = 0; l < levels_.size(); ++l) {
+      const Level& level = levels_[l];
+      level.self_pairs(out, offer);
+      if (l == 0) continue;
+      parallel_collect(level.items.size(), out, [&](size_t e, std::vector<std::pair<int, int>>& found) {
+        for (size_t m = 0; m < l; ++m) {
+          levels_[m].query(level.boxes[e], [&](int j) { offer(level.items[e], j, found); });
+        }
+      });
     }
   }
 
   // visit(item) once for every item whose box meets `box`
   template <class Visit>
   void query(const Box3& box, Visit&& visit) const {
-    for (int item : large_) {
-      if (boxes_[item].intersects(box)) visit(item);
-    }
-    Cell lo, hi;
-    const Vec3 half = Vec3::Constant(cell_ / 2);
-    long long count = 1;
-    if (cell_of(box.min() - half, lo) && cell_of(box.max() + half, hi)) {
-      for (int k = 0; k < 3; ++k) count *= static_cast<long long>(hi[k]) - lo[k] + 1;
-    } else {
-      count = kMaxCells + 1;
-    }
-    if (count > kMaxCells) {  // a huge query: every item
-      for (const auto& [k, item] : entries_) {
-        if (boxes_[item].intersects(box)) visit(item);
-      }
-      return;
-    }
-    for (int a = lo[0]; a <= hi[0]; ++a)
-      for (int b = lo[1]; b <= hi[1]; ++b)
-        for (int c = lo[2]; c <= hi[2]; ++c) {
-          const std::uint64_t k = key(Cell{a, b, c});
-          auto it = std::lower_bound(entries_.begin(), entries_.end(), std::make_pair(k, -1));
-          for (; it != entries_.end() && it->first == k; ++it) {
-            if (boxes_[it->second].intersects(box)) visit(it->second);
-          }
-        }
+    for (const Level& level : levels_) level.query(box, visit);
   }
 
  private:
+  static constexpr int kLevels = 8;
   using Cell = std::array<int, 3>;
-  const std::vector<Box3>& boxes_;
-  double cell_ = 1.0;
-  std::vector<std::pair<std::uint64_t, int>> entries_;
-  std::vector<int> large_;
+  struct Level {
+    Vec3 cell = Vec3::Ones();         // (m) along each axis
+    std::vector<std::uint64_t> keys;  // the non-empty cells, ascending
+    std::vector<int> first;           // (cells + 1) each cell's first entry
+    std::vector<int> items;           // (entries) items in cell order
+    std::vector<Box3> boxes;          // (entries) their boxes
+    std::vector<Box3> bounds;         // (cells) the box holding each cell's boxes
+    std::vector<int> table;           // hash table of cell indices, -1 where empty
+    bool scan = false;                // a query scans every entry (the last level's items not in cells)
 
-  bool cell_of(const Vec3& p, Cell& c) const {
-    for (int k = 0; k < 3; ++k) {
-      const double a = p[k] / cell_;
-      if (!(std::abs(a) < 1e6)) return false;
-      c[k] = static_cast<int>(std::floor(a));
+    // the items of `left` small enough for this level (all of them in the last), the others
+    // left in `left`
+    Level(const std::vector<Box3>& all, std::vector<int>& left, bool last) {
+      const size_t n = left.size();
+      std::vector<Vec3> extents(n);
+      for (size_t i = 0; i < n; ++i) extents[i] = all[left[i]].max() - all[left[i]].min();
+      Vec3 median;
+      std::vector<double> sorted(n);
+      for (int a = 0; a < 3; ++a) {
+        for (size_t i = 0; i < n; ++i) sorted[i] = extents[i][a];
+        std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+        median[a] = sorted[n / 2];
+      }
+      const auto fits = [&](const Vec3& e) { return last || (e.array() <= 4.0 * median.array()).all(); };
+      cell.setZero();
+      for (const Vec3& e : extents) {
+        if (fits(e) && e.allFinite()) cell = cell.cwiseMax(e);
+      }
+      for (int a = 0; a < 3; ++a) {
+        if (!(cell[a] > 0.0 && std::isfinite(cell[a]))) cell[a] = std::isfinite(median[a]) && median[a] > 0.0 ? median[a] : 1.0;
+      }
+      std::vector<std::pair<std::uint64_t, int>> entries;
+      std::vector<int> rest;
+      for (size_t i = 0; i < n; ++i) {
+        Cell c;
+        if (!fits(extents[i])) {
+          rest.push_back(left[i]);
+        } else if (cell_of(all[left[i]].center(), c)) {
+          entries.emplace_back(key(c), left[i]);
+        } else {  // far away or not finite: in the last level, offered to every query
+          scan = true;
+          entries.emplace_back(0, left[i]);
+        }
+      }
+      left.swap(rest);
+      std::sort(entries.begin(), entries.end());
+      items.resize(entries.size());
+      boxes.resize(entries.size());
+      for (size_t e = 0; e < entries.size(); ++e) {
+        if (e == 0 || entries[e].first != entries[e - 1].first) {
+          keys.push_back(entries[e].first);
+          first.push_back(static_cast<int>(e));
+          bounds.emplace_back();
+        }
+        items[e] = entries[e].second;
+        boxes[e] = all[entries[e].second];
+        bounds.back().extend(boxes[e]);
+      }
+      first.push_back(static_cast<int>(entries.size()));
+      // open addressing, at most half full
+      size_t size = 16;
+      while (size < 2 * keys.size()) size *= 2;
+      table.assign(size, -1);
+      for (size_t k = 0; k < keys.size(); ++k) {
+        size_t slot = hash(keys[k]) & (size - 1);
+        while (table[slot] >= 0) slot = (slot + 1) & (size - 1);
+        table[slot] = static_cast<int>(k);
+      }
     }
-    return true;
+
+    template <class Offer>
+    void self_pairs(std::vector<std::pair<int, int>>& out, Offer&& offer) const {
+      static const int ahead[13][3] = {{1, 0, 0},  {-1, 1, 0}, {0, 1, 0},  {1, 1, 0},  {-1, -1, 1},
+                                       {0, -1, 1}, {1, -1, 1}, {-1, 0, 1}, {0, 0, 1},  {1, 0, 1},
+                                       {-1, 1, 1}, {0, 1, 1},  {1, 1, 1}};
+      const auto meet = [&](int p, int q, std::vector<std::pair<int, int>>& found) {
+        if (boxes[p].intersects(boxes[q])) offer(items[p], items[q], found);
+      };
+      if (scan) {  // every pair
+        for (size_t p = 0; p < items.size(); ++p)
+          for (size_t q = p + 1; q < items.size(); ++q) meet(static_cast<int>(p), static_cast<int>(q), out);
+        return;
+      }
+      parallel_collect(keys.size(), out, [&](size_t k, std::vector<std::pair<int, int>>& found) {
+        const int begin = first[k], end = first[k + 1];
+        for (int p = begin; p < end; ++p)
+          for (int q = p + 1; q < end; ++q) meet(p, q, found);
+        const Cell here = unkey(keys[k]);
+        for (const auto& d : ahead) {
+          const int there = find(key(Cell{here[0] + d[0], here[1] + d[1], here[2] + d[2]}));
+          if (there < 0 || !bounds[k].intersects(bounds[there])) continue;
+          for (int p = begin; p < end; ++p) {
+            if (!boxes[p].intersects(bounds[there])) continue;
+            for (int q = first[there]; q < first[there + 1]; ++q) meet(p, q, found);
+          }
+        }
+      });
+    }
+
+    template <class Visit>
+    void query(const Box3& box, Visit&& visit) const {
+      Cell lo, hi;
+      long long count = kMaxCells + 1;
+      if (!scan && cell_of(box.min() - cell / 2, lo) && cell_of(box.max() + cell / 2, hi)) {
+        count = 1;
+        for (int k = 0; k < 3; ++k) count *= static_cast<long long>(hi[k]) - lo[k] + 1;
+      }
+      if (count > kMaxCells || count > static_cast<long long>(keys.size())) {  // more cells than there are: every item
+        for (size_t e = 0; e < items.size(); ++e) {
+          if (boxes[e].intersects(box)) visit(items[e]);
+        }
+        return;
+      }
+      for (int a = lo[0]; a <= hi[0]; ++a)
+        for (int b = lo[1]; b <= hi[1]; ++b)
+          for (int c = lo[2]; c <= hi[2]; ++c) {
+            const int found = find(key(Cell{a, b, c}));
+            if (found < 0 || !bounds[found].intersects(box)) continue;
+            for (int e = first[found]; e < first[found + 1]; ++e) {
+              if (boxes[e].intersects(box)) visit(items[e]);
+            }
+          }
+    }
+
+    int find(std::uint64_t k) const {
+      for (size_t slot = hash(k) & (table.size() - 1);; slot = (slot + 1) & (table.size() - 1)) {
+        const int found = table[slot];
+        if (found < 0 || keys[found] == k) return found;
+      }
+    }
+    bool cell_of(const Vec3& p, Cell& c) const {
+      for (int k = 0; k < 3; ++k) {
+        const double a = p[k] / cell[k];
+        if (!(std::abs(a) < 1e6)) return false;
+        c[k] = static_cast<int>(std::floor(a));
+      }
+      return true;
+    }
+  };
+  std::vector<Level> levels_;
+
+  static size_t hash(std::uint64_t k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    return static_cast<size_t>(k);
   }
   static std::uint64_t key(const Cell& c) {
     const auto bits = [](int v) { return static_cast<std::uint64_t>(v + (1 << 20)) & 0x1FFFFF; };
@@ -348,105 +421,393 @@ class SelfCollision::Grid {
   }
 };
 
+namespace {
+
+// CSR lists of each vertex's items (items[i] holds count vertices): those of vertex k are
+// items_of[first[k]], ..., items_of[first[k + 1] - 1], ascending
+template <class Items>
+void vertex_items(const Items& items, int item_count, int count, int vertex_count, std::vector<int>& first,
+                  std::vector<int>& items_of) {
+  first.assign(vertex_count + 1, 0);
+  for (int i = 0; i < item_count; ++i)
+    for (int k = 0; k < count; ++k) ++first[items(i, k) + 1];
+  for (int k = 0; k < vertex_count; ++k) first[k + 1] += first[k];
+  items_of.resize(first[vertex_count]);
+  std::vector<int> next(first.begin(), first.end() - 1);
+  for (int i = 0; i < item_count; ++i)
+    for (int k = 0; k < count; ++k) items_of[next[items(i, k)]++] = i;
+}
+
+}  // namespace
 
 SelfCollision::SelfCollision(const Triangles& triangles, int vertex_count)
-    : triangles_(triangles), edges_(unique_edges(triangles)), vertex_count_(vertex_count) {}
+    : triangles_(triangles), edges_(unique_edges(triangles)), vertex_count_(vertex_count) {
+  vertex_items([&](int t, int k) { return triangles_(t, k); }, static_cast<int>(triangles_.rows()), 3, vertex_count_,
+               triangle_first_, vertex_triangles_);
+  vertex_items([&](int e, int k) { return edges_[e][k]; }, static_cast<int>(edges_.size()), 2, vertex_count_,
+               edge_first_, vertex_edges_);
+}
 
-const SelfCollision::Candidates& SelfCollision::candidates(const Points& x, const Points& v, double dt, double pad,
-                                                          SelfCollisionStatistics& stats) {
-  Candidates& c = candidates_;
-  // still valid: the same start, a pad at least as large, motions within the margin
-  if (c.pad >= pad && c.x.rows() == x.rows() && c.x == x) {
-    double drift = 0.0;
-    for (Eigen::Index k = 0; k < x.rows() && drift <= c.margin; ++k) {
-      drift = std::max(drift, (dt * v.row(k) - c.motion.row(k)).cwiseAbs().maxCoeff());
-    }
-    if (drift <= c.margin) return c;
+SelfCollision::~SelfCollision() = default;
+SelfCollision::SelfCollision(SelfCollision&&) noexcept = default;
+SelfCollision& SelfCollision::operator=(SelfCollision&&) noexcept = default;
+
+namespace {
+
+// A pair's distance at x (kind 0: point ids[0] and triangle ids[1..3]; kind 1: edges ids[0..1]
+// and ids[2..3]) as a contact: the weights of the closest points, the normal from the second
+// side towards the first (across both sides where they touch, closer than `touch`)
+double pair_contact(int kind, const std::array<int, 4>& ids, const Points& x, double touch,
+                    SelfCollision::Contact& c) {
+  const Vec3 p0 = row(x, ids[0]), p1 = row(x, ids[1]), p2 = row(x, ids[2]), p3 = row(x, ids[3]);
+  Vec3 normal;
+  if (kind == 0) {
+    const Vec3 w = closest_on_triangle(p0, p1, p2, p3);
+    normal = p0 - (w[0] * p1 + w[1] * p2 + w[2] * p3);
+    c = SelfCollision::Contact{{ids[0], ids[1], ids[2], ids[3]}, {1.0, -w[0], -w[1], -w[2]}, Vec3::Zero(), 0.0};
+  } else {
+    const auto [s, t] = closest_on_segments(p0, p1, p2, p3);
+    normal = (p0 + s * (p1 - p0)) - (p2 + t * (p3 - p2));
+    c = SelfCollision::Contact{{ids[0], ids[1], ids[2], ids[3]}, {1.0 - s, s, -(1.0 - t), -t}, Vec3::Zero(), 0.0};
   }
-  c.x = x;
-  c.motion = dt * v;
-  c.pad = pad;
+  c.distance = normal.norm();
+  if (c.distance <= touch) normal = kind == 0 ? Vec3((p2 - p1).cross(p3 - p1)) : Vec3((p1 - p0).cross(p3 - p2));
+  c.normal = normal.squaredNorm() > 0.0 ? Vec3(normal.normalized()) : Vec3::Zero();
+  return c.distance;
+}
+
+// the contact's relative velocity (first side minus second)
+Vec3 relative_velocity(const SelfCollision::Contact& c, const Points& v) {
+  Vec3 relative = Vec3::Zero();
+  for (int k = 0; k < 4; ++k) relative += c.weight[k] * row(v, c.vertex[k]);
+  return relative;
+}
+
+}  // namespace
+
+void SelfCollision::update_candidates(const Points& x, const Points& v, double dt, double pad,
+                                      SelfCollisionStatistics& stats) {
+  const Candidates& c = candidates_;
+  if (c.pad < pad || c.vertex_boxes.size() != static_cast<size_t>(vertex_count_)) {
+    search_all(x, v, dt, pad, stats);
+    return;
+  }
+  // the vertices whose start or end left their box, or whose box is more than twice as large
+  // as a new one would be (the box of a fast vertex that has since slowed down)
+  std::vector<int> moved;
+  for (int k = 0; k < vertex_count_; ++k) {
+    const Vec3 from = row(x, k) - c.frame, to = from + dt * row(v, k) - c.frame_step;
+    const Box3& box = c.vertex_boxes[k];
+    if (!box.contains(from) || !box.contains(to) ||
+        (box.max() - box.min()).maxCoeff() > 2.0 * ((to - from).cwiseAbs().maxCoeff() + 2.0 * c.margin)) {
+      moved.push_back(k);
+    }
+  }
+  if (moved.empty()) return;
+  if (kFullSearch * moved.size() > static_cast<size_t>(vertex_count_)) {
+    search_all(x, v, dt, pad, stats);
+    return;
+  }
+  // many stale items: the grids are built again over the boxes as they are (the pairs need no search)
+  if (8 * (moved.size() + c.stale_points.size()) > static_cast<size_t>(vertex_count_)) build_grids();
+  search_moved(x, v, dt, moved, stats);
+}
+
+void SelfCollision::build_grids() {
+  Candidates& c = candidates_;
+  c.point_grid = std::make_unique<Grid>(c.point_boxes);
+  c.triangle_grid = std::make_unique<Grid>(c.triangle_boxes);
+  c.edge_grid = std::make_unique<Grid>(c.edge_boxes);
+  c.stale_point.assign(c.point_boxes.size(), 0);
+  c.stale_triangle.assign(c.triangle_boxes.size(), 0);
+  c.stale_edge.assign(c.edge_boxes.size(), 0);
+  c.stale_points.clear();
+  c.stale_triangles.clear();
+  c.stale_edges.clear();
+}
+
+namespace {
+
+Box3 grown(Box3 box, double by) {
+  box.min().array() -= by;
+  box.max().array() += by;
+  return box;
+}
+
+// the box holding the boxes of `vertices`, grown by `by`
+Box3 item_box(const std::vector<Box3>& vertex_boxes, const int* vertices, int count, double by) {
+  Box3 box = vertex_boxes[vertices[0]];
+  for (int k = 1; k < count; ++k) box.extend(vertex_boxes[vertices[k]]);
+  return grown(box, by);
+}
+
+bool share_vertex(const std::array<int, 2>& a, const std::array<int, 2>& b) {
+  return a[0] == b[0] || a[0] == b[1] || a[1] == b[0] || a[1] == b[1];
+}
+
+bool on_triangle(const Triangles& triangles, int t, int k) {
+  return triangles(t, 0) == k || triangles(t, 1) == k || triangles(t, 2) == k;
+}
+
+constexpr double kUnmeasured = std::numeric_limits<double>::quiet_NaN();
+
+}  // namespace
+
+// a vertex's box (in the frame): its start and end of the step, grown by the margin
+Box3 SelfCollision::vertex_box(const Points& x, const Points& v, double dt, int k) const {
+  const Candidates& c = candidates_;
+  const Vec3 from = row(x, k) - c.frame;
+  return grown(Box3(from, from).extend(from + dt * row(v, k) - c.frame_step), c.margin);
+}
+
+void SelfCollision::search_all(const Points& x, const Points& v, double dt, double pad,
+                               SelfCollisionStatistics& stats) {
+  Candidates& c = candidates_;
   double edge_sum = 0.0;
   for (const auto& e : edges_) edge_sum += (row(x, e[0]) - row(x, e[1])).norm();
   const double mean_edge = edges_.empty() ? 1.0 : edge_sum / edges_.size();
   c.margin = kMargin * (mean_edge > 0.0 && std::isfinite(mean_edge) ? mean_edge : 1.0);
-  c.point_triangle.clear();
-  c.edge_edge.clear();
-  const double grow = pad + c.margin;
-  const int nt = static_cast<int>(triangles_.rows()), ne = static_cast<int>(edges_.size());
-  std::vector<Box3> triangle_boxes(nt), edge_boxes(ne);
-  for (int t = 0; t < nt; ++t) triangle_boxes[t] = swept_box(x, v, dt, triangles_.row(t).data(), 3, grow);
-  for (int e = 0; e < ne; ++e) edge_boxes[e] = swept_box(x, v, dt, edges_[e].data(), 2, grow);
+  c.pad = pad;
+  const int n = vertex_count_, nt = static_cast<int>(triangles_.rows()), ne = static_cast<int>(edges_.size());
+  c.vertex_boxes.resize(n);
+  c.point_boxes.resize(n);
+  c.triangle_boxes.resize(nt);
+  c.edge_boxes.resize(ne);
+  for (int k = 0; k < n; ++k) {
+    c.vertex_boxes[k] = vertex_box(x, v, dt, k);
+    c.point_boxes[k] = grown(c.vertex_boxes[k], pad / 2);
+  }
+  for (int t = 0; t < nt; ++t) c.triangle_boxes[t] = item_box(c.vertex_boxes, triangles_.row(t).data(), 3, pad / 2);
+  for (int e = 0; e < ne; ++e) c.edge_boxes[e] = item_box(c.vertex_boxes, edges_[e].data(), 2, pad / 2);
+  build_grids();
   // points against triangles
-  const Grid triangle_grid(triangle_boxes);
-  parallel_collect(vertex_count_, c.point_triangle, [&](size_t i, std::vector<std::pair<int, int>>& out) {
+  c.pairs[0].clear();
+  parallel_collect(n, c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = static_cast<int>(i);
-    triangle_grid.query(swept_box(x, v, dt, &k, 1, grow), [&](int t) {
-      if (triangles_(t, 0) != k && triangles_(t, 1) != k && triangles_(t, 2) != k) out.emplace_back(k, t);
+    c.triangle_grid->query(c.point_boxes[k], [&](int t) {
+      if (!on_triangle(triangles_, t, k)) out.push_back({{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false});
     });
   });
   // edges against edges, each pair once
-  const Grid edge_grid(edge_boxes);
-  edge_grid.self_pairs(c.edge_edge, [&](int e, int f) {
-    const auto& a = edges_[e];
-    const auto& b = edges_[f];
-    return !(a[0] == b[0] || a[0] == b[1] || a[1] == b[0] || a[1] == b[1]);
-  });
+  std::vector<std::pair<int, int>> edge_pairs;
+  c.edge_grid->self_pairs(edge_pairs, [&](int e, int f) { return !share_vertex(edges_[e], edges_[f]); });
+  c.pairs[1].resize(edge_pairs.size());
+  for (size_t p = 0; p < edge_pairs.size(); ++p) {
+    const auto& [e, f] = edge_pairs[p];
+    c.pairs[1][p] = {{edges_[e][0], edges_[e][1], edges_[f][0], edges_[f][1]}, kUnmeasured, -1, false};
+  }
+  start_.proximity.clear();
+  start_.measured = false;
   ++stats.searches;
-  stats.candidates += static_cast<long long>(c.point_triangle.size() + c.edge_edge.size());
-  return c;
+  stats.candidates += static_cast<long long>(c.pairs[0].size() + c.pairs[1].size());
 }
 
-void SelfCollision::proximity_contacts(const Points& x, const Points& v, double dt, double h,
-                                       std::vector<Contact>& out, SelfCollisionStatistics& stats) {
-  out.clear();
-  const Candidates& c = candidates(x, v, dt, h, stats);
-  parallel_collect(c.point_triangle.size(), out, [&](size_t n, std::vector<Contact>& found) {
-    const auto [i, j] = c.point_triangle[n];
-    const int a = triangles_(j, 0), b = triangles_(j, 1), d = triangles_(j, 2);
-    const Vec3 p = row(x, i);
-    const Vec3 w = closest_on_triangle(p, row(x, a), row(x, b), row(x, d));
-    const Vec3 q = w[0] * row(x, a) + w[1] * row(x, b) + w[2] * row(x, d);
-    const double distance = (p - q).norm();
-    if (distance >= h) return;
-    Vec3 normal = p - q;
-    if (distance <= 1e-9 * h) {  // touching: the triangle's normal, against the approach
-      normal = (row(x, b) - row(x, a)).cross(row(x, d) - row(x, a));
-      const Vec3 relative = row(v, i) - (w[0] * row(v, a) + w[1] * row(v, b) + w[2] * row(v, d));
-      if (relative.dot(normal) > 0.0) normal = -normal;
-    }
-    if (normal.squaredNorm() == 0.0) return;
-    found.push_back(Contact{{i, a, b, d}, {1.0, -w[0], -w[1], -w[2]}, normal.normalized(), distance});
+void SelfCollision::search_moved(const Points& x, const Points& v, double dt, const std::vector<int>& moved,
+                                 SelfCollisionStatistics& stats) {
+  Candidates& c = candidates_;
+  const double half = c.pad / 2;
+  std::vector<char> moving(vertex_count_, 0);
+  // new boxes: the moved vertices', and their triangles' and edges' (now stale)
+  std::vector<int> triangles, edges;  // touched, ascending
+  for (int k : moved) {
+    moving[k] = 1;
+    c.vertex_boxes[k] = vertex_box(x, v, dt, k);
+    c.point_boxes[k] = grown(c.vertex_boxes[k], half);
+    if (!c.stale_point[k]) c.stale_points.push_back(k);
+    c.stale_point[k] = 1;
+    triangles.insert(triangles.end(), vertex_triangles_.begin() + triangle_first_[k],
+                     vertex_triangles_.begin() + triangle_first_[k + 1]);
+    edges.insert(edges.end(), vertex_edges_.begin() + edge_first_[k], vertex_edges_.begin() + edge_first_[k + 1]);
+  }
+  for (std::vector<int>* items : {&triangles, &edges}) {
+    std::sort(items->begin(), items->end());
+    items->erase(std::unique(items->begin(), items->end()), items->end());
+  }
+  std::vector<char> touched_edge(edges_.size(), 0);
+  for (int t : triangles) {
+    c.triangle_boxes[t] = item_box(c.vertex_boxes, triangles_.row(t).data(), 3, half);
+    if (!c.stale_triangle[t]) c.stale_triangles.push_back(t);
+    c.stale_triangle[t] = 1;
+  }
+  for (int e : edges) {
+    c.edge_boxes[e] = item_box(c.vertex_boxes, edges_[e].data(), 2, half);
+    if (!c.stale_edge[e]) c.stale_edges.push_back(e);
+    c.stale_edge[e] = 1;
+    touched_edge[e] = 1;
+  }
+  // the pairs and the repulsion contacts with a moved vertex go (the others' boxes are as
+  // they were; their distances stay measured)
+  const auto moves = [&](const int* vertex) { return moving[vertex[0]] || moving[vertex[1]] || moving[vertex[2]] || moving[vertex[3]]; };
+  size_t kept = 0;
+  for (auto& pairs : c.pairs) {
+    pairs.erase(std::remove_if(pairs.begin(), pairs.end(), [&](const Pair& p) { return moves(p.vertex.data()); }), pairs.end());
+    kept += pairs.size();
+  }
+  auto& proximity = start_.proximity;
+  proximity.erase(std::remove_if(proximity.begin(), proximity.end(), [&](const Contact& p) { return moves(p.vertex); }),
+                  proximity.end());
+  // every item whose box meets `box`: from the full search's grid (less its stale items) and
+  // a grid of the stale items
+  const auto stale_grid = [](const std::vector<int>& items, const std::vector<Box3>& boxes) {
+    std::vector<Box3> stale(items.size());
+    for (size_t i = 0; i < items.size(); ++i) stale[i] = boxes[items[i]];
+    return Grid(stale);
+  };
+  const Grid stale_points = stale_grid(c.stale_points, c.point_boxes);
+  const Grid stale_triangles = stale_grid(c.stale_triangles, c.triangle_boxes);
+  const Grid stale_edges = stale_grid(c.stale_edges, c.edge_boxes);
+  const auto near = [](const Grid& grid, const std::vector<char>& stale, const Grid& stale_grid,
+                       const std::vector<int>& stale_items, const Box3& box, auto&& visit) {
+    grid.query(box, [&](int i) {
+      if (!stale[i]) visit(i);
+    });
+    stale_grid.query(box, [&](int i) { visit(stale_items[i]); });
+  };
+  // moved points against every triangle; touched triangles against the points that did not move
+  const auto point_triangle = [&](int k, int t) {
+    return Pair{{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false};
+  };
+  parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
+    const int k = moved[i];
+    near(*c.triangle_grid, c.stale_triangle, stale_triangles, c.stale_triangles, c.point_boxes[k], [&](int t) {
+      if (!on_triangle(triangles_, t, k)) out.push_back(point_triangle(k, t));
+    });
   });
-  parallel_collect(c.edge_edge.size(), out, [&](size_t n, std::vector<Contact>& found) {
-    const auto& e = edges_[c.edge_edge[n].first];
-    const auto& f = edges_[c.edge_edge[n].second];
-    const Vec3 p0 = row(x, e[0]), p1 = row(x, e[1]), q0 = row(x, f[0]), q1 = row(x, f[1]);
-    const auto [s, t] = closest_on_segments(p0, p1, q0, q1);
-    Vec3 normal = (p0 + s * (p1 - p0)) - (q0 + t * (q1 - q0));
-    const double distance = normal.norm();
-    if (distance >= h) return;
-    if (distance <= 1e-9 * h) {  // touching: across both edges, against the approach
-      normal = (p1 - p0).cross(q1 - q0);
-      const Vec3 relative = (1 - s) * row(v, e[0]) + s * row(v, e[1]) - (1 - t) * row(v, f[0]) - t * row(v, f[1]);
-      if (relative.dot(normal) > 0.0) normal = -normal;
-    }
-    if (normal.squaredNorm() == 0.0) return;
-    found.push_back(Contact{{e[0], e[1], f[0], f[1]}, {1.0 - s, s, -(1.0 - t), -t}, normal.normalized(), distance});
+  parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
+    const int t = triangles[i];
+    near(*c.point_grid, c.stale_point, stale_points, c.stale_points, c.triangle_boxes[t], [&](int k) {
+      if (!moving[k] && !on_triangle(triangles_, t, k)) out.push_back(point_triangle(k, t));
+    });
   });
+  // touched edges against every edge (a pair of two touched edges once)
+  parallel_collect(edges.size(), c.pairs[1], [&](size_t i, std::vector<Pair>& out) {
+    const int e = edges[i];
+    near(*c.edge_grid, c.stale_edge, stale_edges, c.stale_edges, c.edge_boxes[e], [&](int f) {
+      if ((touched_edge[f] && f <= e) || share_vertex(edges_[e], edges_[f])) return;
+      const int a = std::min(e, f), b = std::max(e, f);
+      out.push_back({{edges_[a][0], edges_[a][1], edges_[b][0], edges_[b][1]}, kUnmeasured, -1, false});
+    });
+  });
+  start_.measured = false;
+  ++stats.updates;
+  stats.candidates += static_cast<long long>(c.pairs[0].size() + c.pairs[1].size() - kept);
 }
 
-void SelfCollision::collision_contacts(const Points& x, const Points& v, double dt, double tolerance,
-                                       std::vector<Contact>& out, SelfCollisionStatistics& stats) {
-  out.clear();
-  const Candidates& cand = candidates(x, v, dt, tolerance, stats);
-  const auto test = [&](int kind, const int ids[4], std::vector<Contact>& found) {
-    Vec3 p[4], d[4];
-    for (int k = 0; k < 4; ++k) {
-      p[k] = row(x, ids[k]);
-      d[k] = dt * row(v, ids[k]);
+const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& v, double dt,
+                                                 const SelfCollisionSettings& settings,
+                                                 SelfCollisionStatistics& stats) {
+  const double h = settings.thickness;
+  Start& s = start_;
+  Candidates& c = candidates_;
+  const bool new_step = !(s.x.rows() == x.rows() && s.x == x);
+  if (new_step) {
+    // the frame moves on, by the median motion over this step of (at most about 1,000 of) the vertices
+    c.frame += c.frame_step;
+    const Eigen::Index stride = std::max<Eigen::Index>(1, x.rows() / 1024);
+    std::vector<double> motion((x.rows() + stride - 1) / stride);
+    for (int a = 0; a < 3 && !motion.empty(); ++a) {
+      for (size_t i = 0; i < motion.size(); ++i) motion[i] = dt * v(static_cast<Eigen::Index>(i) * stride, a);
+      std::nth_element(motion.begin(), motion.begin() + motion.size() / 2, motion.end());
+      c.frame_step[a] = std::isfinite(motion[motion.size() / 2]) ? motion[motion.size() / 2] : 0.0;
     }
-    // the two sides' boxes over the step, now (the candidates were found with a margin)
+  }
+  update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats);
+  if (new_step || s.h != h) {
+    // every pair to be measured again
+    s.x = x;
+    s.h = h;
+    for (auto& pairs : c.pairs) {
+      for (Pair& p : pairs) {
+        p.distance = kUnmeasured;
+        p.clear = -1;
+        p.exact = false;
+      }
+    }
+    s.proximity.clear();
+    s.measured = false;
+  }
+  if (!s.measured) measure(x, h);
+  return s;
+}
+
+// The distances of the pairs not yet measured: the gap between the two sides' boxes where it
+// is at least h (a lower bound, for the continuous test to refine if it must), the exact
+// distance otherwise; the pairs closer than h join the repulsion contacts
+void SelfCollision::measure(const Points& x, double h) {
+  for (int kind = 0; kind < 2; ++kind) {
+    auto& pairs = candidates_.pairs[kind];
+    const int split = kind == 0 ? 1 : 2;
+    parallel_collect(pairs.size(), start_.proximity, [&](size_t n, std::vector<Contact>& found) {
+      Pair& p = pairs[n];
+      if (!std::isnan(p.distance)) return;
+      Box3 first, second;
+      for (int k = 0; k < 4; ++k) (k < split ? first : second).extend(row(x, p.vertex[k]));
+      const double gap = (first.min() - second.max()).cwiseMax(second.min() - first.max()).cwiseMax(0.0).norm();
+      if (gap >= h) {
+        p.distance = gap;
+        return;
+      }
+      Contact c;
+      p.distance = pair_contact(kind, p.vertex, x, 1e-9 * h, c);
+      p.exact = true;
+      if (c.distance < h && c.normal.squaredNorm() > 0.0) found.push_back(c);
+    });
+  }
+  start_.measured = true;
+}
+
+void SelfCollision::collision_contacts(const Points& x, const Points& v, double dt,
+                                       const SelfCollisionSettings& settings, std::vector<Contact>& out,
+                                       SelfCollisionStatistics& stats) {
+  out.clear();
+  start(x, v, dt, settings, stats);
+  const double tolerance = collision_tolerance(settings);
+  // this pass, and the vertices whose velocities changed since the last
+  Passes& m = passes_;
+  ++m.pass;
+  if (m.changed.size() != static_cast<size_t>(vertex_count_) || m.dt != dt || m.tolerance != tolerance) {
+    m.first = m.pass;
+    m.changed.assign(vertex_count_, m.pass);
+    m.velocity = v;
+    m.dt = dt;
+    m.tolerance = tolerance;
+  }
+  for (int k = 0; k < vertex_count_; ++k) {
+    if (v.row(k) != m.velocity.row(k)) {
+      m.changed[k] = m.pass;
+      m.velocity.row(k) = v.row(k);
+    }
+  }
+  // a pair whose distance minus its relative motion is above this cannot collide (the slack
+  // covers round-off in the distances)
+  const double reach_limit = tolerance * (1.0 + 1e-6) + 1e-12;
+  std::atomic<long long> tests{0};
+  // the earliest contact of a pair over the step, if any; the pair marked clear otherwise
+  const auto test = [&](int kind, Pair& pair, std::vector<Contact>& found) {
+    const std::array<int, 4>& ids = pair.vertex;
+    if (pair.clear >= m.first && m.changed[ids[0]] <= pair.clear && m.changed[ids[1]] <= pair.clear &&
+        m.changed[ids[2]] <= pair.clear && m.changed[ids[3]] <= pair.clear) {
+      return;  // clear at a pass since which none of its vertices' velocities changed
+    }
+    pair.clear = m.pass;
+    Vec3 d[4];
+    for (int k = 0; k < 4; ++k) d[k] = dt * row(v, ids[k]);
+    // d - R: the distance minus the pair's relative motion R, a lower bound of its distance
+    // over the step (the exact distance taken where the boxes' gap is not enough)
+    const double r = kind == 0
+        ? std::sqrt(std::max({(d[1] - d[0]).squaredNorm(), (d[2] - d[0]).squaredNorm(), (d[3] - d[0]).squaredNorm()}))
+        : (d[1] - d[0]).norm() + std::sqrt(std::max((d[2] - d[0]).squaredNorm(), (d[3] - d[0]).squaredNorm()));
+    if (pair.distance - reach_limit > r) return;
+    if (!pair.exact) {
+      Contact c;
+      pair.distance = pair_contact(kind, ids, x, 0.0, c);
+      pair.exact = true;
+      if (pair.distance - reach_limit > r) return;
+    }
+    tests.fetch_add(1, std::memory_order_relaxed);
+    Vec3 p[4];
+    for (int k = 0; k < 4; ++k) p[k] = row(x, ids[k]);
+    // the two sides' boxes over the step
     const int split = kind == 0 ? 1 : 2;
     Box3 first, second;
     for (int k = 0; k < 4; ++k) {
@@ -501,20 +862,15 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
       if (!(relative.dot(normal) < 0.0)) continue;
       c.normal = normal;
       found.push_back(c);
+      pair.clear = -1;
       return;  // the earliest contact of the pair
     }
   };
-  parallel_collect(cand.point_triangle.size(), out, [&](size_t n, std::vector<Contact>& found) {
-    const auto [i, j] = cand.point_triangle[n];
-    const int ids[4] = {i, triangles_(j, 0), triangles_(j, 1), triangles_(j, 2)};
-    test(0, ids, found);
-  });
-  parallel_collect(cand.edge_edge.size(), out, [&](size_t n, std::vector<Contact>& found) {
-    const auto& e = edges_[cand.edge_edge[n].first];
-    const auto& f = edges_[cand.edge_edge[n].second];
-    const int ids[4] = {e[0], e[1], f[0], f[1]};
-    test(1, ids, found);
-  });
+  for (int kind = 0; kind < 2; ++kind) {
+    auto& pairs = candidates_.pairs[kind];
+    parallel_collect(pairs.size(), out, [&](size_t n, std::vector<Contact>& found) { test(kind, pairs[n], found); });
+  }
+  stats.tests += tests.load();
 }
 
 void SelfCollision::resolve(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
@@ -529,20 +885,28 @@ void SelfCollision::repel(const Points& x, Points& v, const Eigen::VectorXd& inv
                           const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
   const double h = settings.thickness;
   if (!(h > 0.0)) return;
-  std::vector<Contact> contacts;
-  proximity_contacts(x, v, dt, h, contacts, stats);
-  for (const Contact& c : contacts) {
+  const std::vector<Contact>& contacts = start(x, v, dt, settings, stats).proximity;
+  // pairs in touch: the normal across both sides, turned against their approach now (before
+  // any of this pass's impulses)
+  std::vector<std::pair<size_t, Vec3>> touching;
+  for (size_t k = 0; k < contacts.size(); ++k) {
+    const Contact& c = contacts[k];
+    if (c.distance <= 1e-9 * h) touching.emplace_back(k, relative_velocity(c, v).dot(c.normal) > 0.0 ? Vec3(-c.normal) : c.normal);
+  }
+  auto next = touching.begin();
+  for (size_t k = 0; k < contacts.size(); ++k) {
+    Contact c = contacts[k];
+    if (next != touching.end() && next->first == k) c.normal = (next++)->second;
     stats.repulsions += apply_impulse(c, kRepulsionRate * (h - c.distance) / dt, settings.friction, v, inverse_mass);
   }
 }
 
 bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                             const SelfCollisionSettings& settings, SelfCollisionStatistics& stats, int passes) {
-  const double tolerance = collision_tolerance(settings);
   const double separation = kSeparation * settings.thickness / dt;
   std::vector<Contact> contacts;
   for (int pass = 0; pass < passes; ++pass) {
-    collision_contacts(x, v, dt, tolerance, contacts, stats);
+    collision_contacts(x, v, dt, settings, contacts, stats);
     if (contacts.empty()) return true;
     for (const Contact& c : contacts) stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass);
   }
@@ -551,7 +915,6 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
 
 void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                                  const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
-  const double tolerance = collision_tolerance(settings);
   std::vector<Contact> contacts;
   // 3. rigid impact zones until nothing collides
   std::vector<int> parent(vertex_count_);
@@ -574,7 +937,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
                }), list.end());
   };
   for (int round = 0; round < settings.zone_iterations; ++round) {
-    collision_contacts(x, v, dt, tolerance, contacts, stats);
+    collision_contacts(x, v, dt, settings, contacts, stats);
     outside_zones(contacts);
     if (contacts.empty()) return;
     ++stats.zone_rounds;
@@ -626,7 +989,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     }
   }
   // the last resort: nothing moves, and a cloth free of crossings stays free of them
-  collision_contacts(x, v, dt, tolerance, contacts, stats);
+  collision_contacts(x, v, dt, settings, contacts, stats);
   outside_zones(contacts);
   if (contacts.empty()) return;
   ++stats.stills;

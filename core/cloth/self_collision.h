@@ -18,13 +18,23 @@
 // Impulses are shared by the pair's vertices in proportion to their weights and inverse
 // masses (pinned vertices have none), so momentum is conserved.
 //
-// Candidates come from a uniform grid over the boxes swept by triangles and edges over the
-// step (each entered once; the cell as large as the boxes), padded by a margin of a quarter edge: the list is kept
-// for the step's later passes while no vertex's motion over the step has changed by more than
-// the margin since (so it still holds every pair that can meet), and found again otherwise.
-// A pair's cubic is skipped when its Bernstein coefficients on [0, 1] share one sign (no root,
-// exactly). Pairs are tested in parallel in fixed chunks; impulses are applied in order, so
-// the result is the same at any thread count. The cost is near linear in the vertex count.
+// Candidates come from uniform grids over boxes: a vertex's box holds its start and end of the
+// step, grown by a margin (a tenth of the mean edge); a point's, a triangle's or an edge's box
+// holds its vertices' boxes, grown by half the thickness. The pairs whose boxes meet are kept,
+// across passes and across steps, while every vertex's start and end stay in its box: then
+// every pair that can come within the thickness is among them. A vertex that leaves its box
+// gets a new one, and only the pairs around it are found again (against the grids of the last
+// full search, and a small grid of the items whose boxes changed since, until an eighth of the
+// vertices have: then the grids are built again); the full search is done again when an eighth
+// of the vertices leave their boxes at once. At each step's start every
+// candidate's distance d is measured once; it gives the repulsions, and it spares most pairs
+// the cubic: a pair's distance changes over the step by at most its relative motion R (the
+// largest motion of the second side's vertices relative to the first side's first vertex, plus
+// the first side's own for two edges: distances are 1-Lipschitz in each vertex), so a pair
+// with d - R above the tolerance cannot collide. The cubic itself is skipped when its
+// Bernstein coefficients on [0, 1] share one sign (no root, exactly). Pairs are tested in
+// parallel in fixed chunks; impulses are applied in order, so the result is the same at any
+// thread count. The cost is near linear in the vertex count.
 #pragma once
 
 #include "math/types.h"
@@ -32,6 +42,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <memory>
 #include <vector>
 
 namespace simbake {
@@ -51,11 +62,16 @@ struct SelfCollisionStatistics {
   long long stills = 0;        // steps in which the last resort held the cloth still
   long long searches = 0;      // times the candidate pairs were found
   long long candidates = 0;    // candidate pairs found, in all searches
+  long long updates = 0;       // times the pairs around the vertices that left their boxes were found again
+  long long tests = 0;         // candidate pairs put through the continuous test (d - R at most the tolerance)
 };
 
 class SelfCollision {
  public:
   SelfCollision(const Triangles& triangles, int vertex_count);
+  ~SelfCollision();
+  SelfCollision(SelfCollision&&) noexcept;
+  SelfCollision& operator=(SelfCollision&&) noexcept;
 
   // Changes v so that x + s dt v, s in [0, 1], never passes a layer through another: the
   // three parts below in turn. inverse_mass (n): 0 for pinned vertices, which never move.
@@ -85,23 +101,70 @@ class SelfCollision {
 
  private:
   class Grid;
-  // candidate pairs (vertex, triangle) and (edge, edge), found at positions x with motion
-  // dt v; valid while every vertex's motion stays within `margin` of that
+  // a candidate pair: four vertices (a point and a triangle's three, or two edges' two), its
+  // distance at the step's start (m, NaN until measured; where `exact` is false, only a lower
+  // bound: the gap between the two sides' boxes, at least h) and the collision pass after
+  // which the continuous test last found it clear (-1: not since it was measured)
+  struct Pair {
+    std::array<int, 4> vertex;
+    double distance;
+    int clear;
+    bool exact;
+  };
+  // the candidate pairs, pairs[0] points against triangles and pairs[1] edges against edges;
+  // the boxes (see the top of this file; vertex_boxes without the pad) and the grids over them
+  // as they were at the last full search; `stale` marks the items whose boxes changed since
+  // (left out of those grids)
   struct Candidates {
-    std::vector<std::pair<int, int>> point_triangle, edge_edge;
-    Points x, motion;
-    double pad = -1.0, margin = 0.0;
+    std::array<std::vector<Pair>, 2> pairs;
+    std::vector<Box3> vertex_boxes, point_boxes, triangle_boxes, edge_boxes;
+    std::unique_ptr<Grid> point_grid, triangle_grid, edge_grid;
+    std::vector<char> stale_point, stale_triangle, stale_edge;
+    std::vector<int> stale_points, stale_triangles, stale_edges;
+    double pad = -1.0, margin = 0.0;  // (m)
+    // the boxes are in a frame that moves with the cloth: a translation, by `frame` (m) at
+    // this step's start and by frame_step (m) more over the step (the vertices' median motion)
+    Vec3 frame = Vec3::Zero(), frame_step = Vec3::Zero();
+  };
+  // the step's start positions x (n x 3) and the repulsion contacts there: the pairs closer
+  // than the thickness h (those touching, closer than 1e-9 h, with their normal still to be
+  // turned against the approach)
+  struct Start {
+    Points x;
+    double h = -1.0;
+    bool measured = false;  // every pair's distance is known, and the contacts
+    std::vector<Contact> proximity;
+  };
+  // the collision passes so far: a pair found clear after pass p is clear again at a later
+  // pass if none of its vertices' velocities has changed since (and the step, dt and the
+  // tolerance are the same)
+  struct Passes {
+    int pass = 0;
+    int first = 0;             // passes before this one count for nothing
+    std::vector<int> changed;  // (n) the last pass before which each vertex's velocity changed
+    Points velocity;           // (n x 3) the velocities at the last pass (m/s)
+    double dt = 0.0, tolerance = 0.0;
   };
   Candidates candidates_;
+  Start start_;
+  Passes passes_;
   Triangles triangles_;
   std::vector<std::array<int, 2>> edges_;
   int vertex_count_;
+  // each vertex's triangles and edges: those of vertex k at [first[k], first[k + 1])
+  std::vector<int> triangle_first_, vertex_triangles_, edge_first_, vertex_edges_;
 
-  void proximity_contacts(const Points& x, const Points& v, double dt, double h, std::vector<Contact>& out,
-                          SelfCollisionStatistics& stats);
-  void collision_contacts(const Points& x, const Points& v, double dt, double tolerance, std::vector<Contact>& out,
-                          SelfCollisionStatistics& stats);
-  const Candidates& candidates(const Points& x, const Points& v, double dt, double pad, SelfCollisionStatistics& stats);
+  void update_candidates(const Points& x, const Points& v, double dt, double pad, SelfCollisionStatistics& stats);
+  Box3 vertex_box(const Points& x, const Points& v, double dt, int k) const;
+  void build_grids();
+  void search_all(const Points& x, const Points& v, double dt, double pad, SelfCollisionStatistics& stats);
+  void search_moved(const Points& x, const Points& v, double dt, const std::vector<int>& moved,
+                    SelfCollisionStatistics& stats);
+  const Start& start(const Points& x, const Points& v, double dt, const SelfCollisionSettings& settings,
+                     SelfCollisionStatistics& stats);
+  void measure(const Points& x, double h);
+  void collision_contacts(const Points& x, const Points& v, double dt, const SelfCollisionSettings& settings,
+                          std::vector<Contact>& out, SelfCollisionStatistics& stats);
 };
 
 }  // namespace simbake
