@@ -753,6 +753,10 @@ void SelfCollision::measure(const Points& x, double h) {
       if (c.distance < h && c.normal.squaredNorm() > 0.0) found.push_back(c);
     });
   }
+  // closest first (the order does not depend on how the pairs were found)
+  std::sort(start_.proximity.begin(), start_.proximity.end(), [](const Contact& a, const Contact& b) {
+    return a.distance != b.distance ? a.distance < b.distance : std::lexicographical_compare(a.vertex, a.vertex + 4, b.vertex, b.vertex + 4);
+  });
   start_.measured = true;
 }
 
@@ -861,6 +865,7 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
       if (relative.dot(normal) > 0.0) normal = -normal;
       if (!(relative.dot(normal) < 0.0)) continue;
       c.normal = normal;
+      c.time = s;
       found.push_back(c);
       pair.clear = -1;
       return;  // the earliest contact of the pair
@@ -870,6 +875,10 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
     auto& pairs = candidates_.pairs[kind];
     parallel_collect(pairs.size(), out, [&](size_t n, std::vector<Contact>& found) { test(kind, pairs[n], found); });
   }
+  // earliest first (the order does not depend on how the pairs were found)
+  std::sort(out.begin(), out.end(), [](const Contact& a, const Contact& b) {
+    return a.time != b.time ? a.time < b.time : std::lexicographical_compare(a.vertex, a.vertex + 4, b.vertex, b.vertex + 4);
+  });
   stats.tests += tests.load();
 }
 

@@ -97,6 +97,7 @@ class SelfCollision {
     double weight[4];
     Vec3 normal;
     double distance;  // (m) at the start of the step (repulsion) or 0 (collision)
+    double time = 0.0;  // of the step, in [0, 1]: when the collision happens (0 for a repulsion)
   };
 
  private:
