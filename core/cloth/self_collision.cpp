@@ -22,8 +22,9 @@ constexpr double kSeparation = 1e-3;        // of h per step: the separating spe
 constexpr long long kMaxCells = 4096;       // a query over more grid cells scans every item
 constexpr double kMargin = 0.1;             // of the mean edge: how far a vertex's box reaches past
                                             // its start and end of the step
-constexpr size_t kFullSearch = 8;           // the pairs are all found again when more than 1 / 8 of the
-                                            // vertices leave their boxes at once
+constexpr size_t kMovedFraction = 8;       // all pairs are found again when more than 1 / 8 of the vertices
+                                            // leave their boxes at once, the grids built again when 1 / 8
+                                            // of them have since the last full search
 constexpr size_t kChunk = 512;              // pairs per parallel task (fixed: same result at any thread count)
 
 Vec3 row(const Points& p, int k) { return p.row(k).transpose(); }
@@ -504,12 +505,12 @@ void SelfCollision::update_candidates(const Points& x, const Points& v, double d
     }
   }
   if (moved.empty()) return;
-  if (kFullSearch * moved.size() > static_cast<size_t>(vertex_count_)) {
+  if (kMovedFraction * moved.size() > static_cast<size_t>(vertex_count_)) {
     search_all(x, v, dt, pad, stats);
     return;
   }
   // many stale items: the grids are built again over the boxes as they are (the pairs need no search)
-  if (8 * (moved.size() + c.stale_points.size()) > static_cast<size_t>(vertex_count_)) build_grids();
+  if (kMovedFraction * (moved.size() + c.stale_points.size()) > static_cast<size_t>(vertex_count_)) build_grids();
   search_moved(x, v, dt, moved, stats);
 }
 

@@ -18,23 +18,30 @@
 // Impulses are shared by the pair's vertices in proportion to their weights and inverse
 // masses (pinned vertices have none), so momentum is conserved.
 //
-// Candidates come from uniform grids over boxes: a vertex's box holds its start and end of the
-// step, grown by a margin (a tenth of the mean edge); a point's, a triangle's or an edge's box
-// holds its vertices' boxes, grown by half the thickness. The pairs whose boxes meet are kept,
-// across passes and across steps, while every vertex's start and end stay in its box: then
-// every pair that can come within the thickness is among them. A vertex that leaves its box
-// gets a new one, and only the pairs around it are found again (against the grids of the last
-// full search, and a small grid of the items whose boxes changed since, until an eighth of the
-// vertices have: then the grids are built again); the full search is done again when an eighth
-// of the vertices leave their boxes at once. At each step's start every
-// candidate's distance d is measured once; it gives the repulsions, and it spares most pairs
-// the cubic: a pair's distance changes over the step by at most its relative motion R (the
-// largest motion of the second side's vertices relative to the first side's first vertex, plus
-// the first side's own for two edges: distances are 1-Lipschitz in each vertex), so a pair
-// with d - R above the tolerance cannot collide. The cubic itself is skipped when its
-// Bernstein coefficients on [0, 1] share one sign (no root, exactly). Pairs are tested in
-// parallel in fixed chunks; impulses are applied in order, so the result is the same at any
-// thread count. The cost is near linear in the vertex count.
+// Impulses are applied in an order that does not depend on how the pairs were found:
+// repulsions closest first, collisions earliest first (ties by vertex index), so the result is
+// the same at any thread count and with any broad phase.
+//
+// Candidates come from uniform grids over boxes kept in a frame that translates with the
+// vertices' median motion (a cloth falling as one keeps its boxes): a vertex's box holds its
+// start and end of the step, grown by a margin (a tenth of the mean edge); a point's, a
+// triangle's or an edge's box holds its vertices' boxes, grown by half the thickness, so two
+// items that come within the thickness have meeting boxes. The pairs whose boxes meet are kept,
+// across passes and steps, while every vertex's start and end stay in its box. A vertex that
+// leaves its box gets a new one and only the pairs around it are found again (against the grids
+// of the last full search, less the items whose boxes changed since, and a small grid of those);
+// all pairs are found again when an eighth of the vertices leave their boxes at once.
+// Each candidate's distance d at the step's start is measured once (where the gap between its
+// two sides' boxes is at least h, the gap stands for it until a finer bound is needed); it gives
+// the repulsions and spares most pairs the cubic: distances are 1-Lipschitz in each vertex, so
+// over the step a pair's distance falls by at most its relative motion R (the largest motion of
+// the second side's vertices relative to the first side's first vertex, plus the first side's
+// own spread for two edges), and a pair with d - R above the tolerance cannot collide. A pair
+// found clear in a collision pass is clear again in a later one if none of its four vertices'
+// velocities changed in between. The cubic itself is skipped when its Bernstein coefficients on
+// [0, 1] share one sign (no root, exactly). Pairs are tested in parallel in fixed chunks. The
+// cost grows with the vertex count times the candidates a vertex has (flat: about 9 for a
+// sheet at rest; more when it moves fast against its neighbours, as at an impact).
 #pragma once
 
 #include "math/types.h"

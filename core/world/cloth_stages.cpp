@@ -31,7 +31,7 @@ namespace simbake {
 
 namespace {
 constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
-constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+constexpr double kStrainSlack = 0.01;      // a pass is enough once no edge is past the limit by 1% of it
 constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its two surfaces apart per step
 constexpr double kPinchGap = 3.0;          // x h: the gap a pinch holds open
 constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
