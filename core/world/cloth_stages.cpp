@@ -37,6 +37,8 @@ constexpr double kPinchGap = 3.0;          // x h: the gap a pinch holds open
 constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
 constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
+constexpr double kMaxLever = 4.0;         // a contact moves no cloth vertex faster than this many times its
+                                          // point's velocity change (see collide_cloth's contact_point)
 }  // namespace
 
 int World::add_cloth(const ClothDesc& desc, double friction, double thickness, bool self_collision) {
@@ -205,7 +207,7 @@ void World::collide_cloth(int c, double dt) {
   const Eigen::VectorXd& inverse_mass = cloth_inverse_mass_[c];
   auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc,
                            const Vec3& normal, double phi, double mu) {
-    double denom = 0.0, weight = 0.0;
+    double denom = 0.0, weight = 0.0, lever = 0.0;
     Vec3 point_velocity = Vec3::Zero();
     for (int i = 0; i < count; ++i) {
       denom += w[i] * w[i] * inverse_mass[ids[i]];
@@ -213,6 +215,14 @@ void World::collide_cloth(int c, double dt) {
       point_velocity += w[i] * v.row(ids[i]).transpose();
     }
     if (denom <= 0.0) return;
+    // how much faster than the point its fastest vertex must move: 1 for a vertex or a point
+    // of a free triangle, 3 at the centroid of a triangle with two pinned vertices, and
+    // without bound as the point nears a pinned vertex (a lever about the pins: a flag pole's
+    // corner on a triangle by the pins sent its free vertex to 1e15 m/s). Past kMaxLever the
+    // pins hold the point: scaling the push down instead only spread the blow-up over the
+    // strain-collision passes, each pushing again while the point stays inside
+    for (int i = 0; i < count; ++i) lever = std::max(lever, w[i] * inverse_mass[ids[i]] / denom);
+    if (lever > kMaxLever) return;
     Vec3 body_velocity = Vec3::Zero();
     if (body >= 0) {
       const Vec3 omega = defs_[body].kinematic ? spin_[body] : angular_velocity(defs_[body], states_[body]);
