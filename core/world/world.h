@@ -60,6 +60,9 @@ struct WorldSettings {
                                          // speculative and exact box contacts)
   double cloth_contact_substep = 1.0 / 240.0;  // (s) longest substep while a dynamic body may
                                          // touch a cloth (see frame_schedule)
+  double bounce_substep = 1.0 / 240.0;   // (s) longest substep while a body may bounce: an awake
+                                         // dynamic body and any restitution above 0 (see
+                                         // frame_schedule)
   double cloth_max_substep = 1.0 / 120.0; // (s) longest automatic cloth step: cloths step at
                                          // their own, coarser rate (every few substeps)
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
