@@ -155,7 +155,8 @@ Pose World::pose_at(int i, double s) const {
 void World::find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const {
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
   const long long tests = sweep_tests(a, b);
-  // (a fast pair reports the first fraction with a point inside: no margin there)
+  // (a fast pair reports the first fraction with a point inside: no margin there, and its
+  // samples, not the boxes' exact contact: the impacts of the swept test are the samples')
   if (tests > 1) margin = 0.0;
   long long first = 1, last = tests;
   if (tests > 1) {
@@ -175,16 +176,17 @@ void World::find_penetrations(int a, int b, double margin, std::vector<Penetrati
     }
   }
   for (long long k = first; k <= last; ++k) {
-    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, out)) return;
+    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, tests == 1, out)) return;
   }
 }
 
 // Appends a's samples inside b at fraction s of the step, and with a margin > 0 those outside
 // closer than the margin too (but none within kTouching of the surface, see below); true when
-// there were any
-bool World::samples_inside(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
+// there were any. With exact_boxes, two boxes meet by box_pair_contact instead
+bool World::samples_inside(int a, int b, double s, double margin, bool exact_boxes,
+                           std::vector<Penetration>& out) const {
   const std::size_t before = out.size();
-  switch (box_pair_contact(a, b, s, margin, out)) {
+  switch (exact_boxes ? box_pair_contact(a, b, s, margin, out) : 0) {
     case 1: return out.size() > before;
     case 2: return false;  // (the pair's other direction found them)
     default: break;
@@ -285,16 +287,21 @@ bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector
 // (see box_edge_crossing) each is carried by both bodies, a's point in a's frame and the
 // matching point of b (depth along the normal) in b's, so that refresh_contact measures the
 // separation of the two along the normal carried by b. The pair is found once, in the
-// direction a < b. Returns 0 when the pair is not two boxes, 1 when it was found here (points
-// appended), 2 when it is left to the other direction
+// direction a < b. Returns 0 when the pair is not two boxes (or they overlap too deep, see
+// below), 1 when it was found here (points appended), 2 when it is left to the other direction
 int World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
   if (!settings_.box_contacts || b == kGround) return 0;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
   if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b)) return 0;
-  if (a > b) return 2;
+  // deeper than a quarter of the thinner box the axis of least overlap may be the far side's
+  // (a box driven past a wall's middle in one long step would be pushed on through): the
+  // samples then, both ways, with their own guard for deep points (see apply_contact_impulse)
+  const double trusted = kTrustedDepth * std::min(defs_[a].thickness, defs_[b].thickness);
+  if (a > b) return box_overlap_depth(box_a, box_b) > trusted ? 0 : 2;
   BoxContact contact;
   if (!box_box_contact(box_a, box_b, margin, contact)) return 1;
+  if (contact.depth > trusted) return 0;
   const Vec3 normal_b = pose_b.rotation.transpose() * contact.normal;
   for (int k = 0; k < contact.count; ++k) {
     const double depth = contact.points[k].depth;

@@ -304,7 +304,7 @@ class World {
   double contact_margin(int a, int b) const;
   long long sweep_tests(int a, int b) const;
   Pose pose_at(int i, double s) const;
-  bool samples_inside(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  bool samples_inside(int a, int b, double s, double margin, bool exact_boxes, std::vector<Penetration>& out) const;
   bool box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   int box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
