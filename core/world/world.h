@@ -53,6 +53,7 @@ struct WorldSettings {
   bool speculative_contacts = true;      // the contact stage also takes points not yet inside,
                                          // closer than a margin (see contact_margin), and lets
                                          // each close its gap within the step but no more
+                                         // (worlds without cloths only)
   bool box_contacts = true;              // two boxes meet by their exact contact (separating
                                          // axes and clipping, rigid/box_contact.h), not by
                                          // samples against the level set
