@@ -147,7 +147,7 @@ TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
     world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 30.0, 0.0)));  // dynamic, far away
     world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
     EXPECT_EQ(world.automatic_cloth_steps(frame), 3);
-    EXPECT_EQ(world.automatic_substeps(frame), 12);  // the bodies' 10, rounded up to a multiple of 3
+    EXPECT_EQ(world.automatic_substeps(frame), 6);  // the bodies' 5, rounded up to a multiple of 3
   }
   {
     World world;
