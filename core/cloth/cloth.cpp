@@ -92,9 +92,10 @@
 // sides, and solved by preconditioned conjugate gradients (our own loop, multiplying the
 // preconditioner's 3x3-block copy of the matrix: 1.4x fewer bytes than Eigen's scalar one)
 // to a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
-// is block-Jacobi (its iterations grow as 1/h) unless multigrid is asked for: a
-// smoothed-aggregation V-cycle whose iteration count stays nearly flat as the mesh is
-// refined (why it is not yet the default: below, at kMaxSolverIterations).
+// is a smoothed-aggregation multigrid V-cycle, whose iteration count stays nearly flat as
+// the mesh is refined, for unpinned cloths of 1,000 vertices or more; small and pinned cloths
+// keep block-Jacobi (its iterations grow as 1/h; why pinned ones: below, at
+// kMultigridVertices).
 // (A sparse Cholesky factorization each step, SimplicialLDLT, was 10x slower on the 64 x 64
 // drape; see benchmarks/cloth.)
 // For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
@@ -162,13 +163,20 @@ constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
-// Automatic preconditioner: block-Jacobi. Multigrid (ClothPreconditioner::kMultigrid) takes
-// 5-10x fewer iterations on the drape at 65 x 65 and above and no longer presses cloth_demo's
-// cloth into the ground (benchmarks/results/cloth_solve_speed.md), but with it the flag scene
-// dies in its first step: a pole corner's contact against a triangle whose weight is all on a
-// pinned vertex gives the free vertex with a round-off weight ~1e15 m/s (contact_point in
-// world/cloth_stages.cpp divides by its squared weight); block-Jacobi's solution misses that
-// configuration by luck. It becomes the default once that contact is bounded.
+constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices (and no pin)
+// Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more
+// and no pinned vertex; block-Jacobi otherwise. On the drape multigrid takes 4-9x fewer
+// iterations from 33 x 33 up, with a smaller profile error at 33-129; at 17 x 17 (289
+// vertices) block-Jacobi's cheaper iterations win, at no loss of accuracy there
+// (benchmarks/results/cloth_solve_speed.md). The 81 mm it once let cloth_demo's heavy body
+// press the cloth into the ground is gone since the pinch stage (0 mm over its 97 frames,
+// block-Jacobi 1.2 mm). Pinned cloths keep block-Jacobi: with multigrid the flag dies in its
+// first step, because a pole corner's contact against a triangle whose weight is all on a
+// pinned vertex hands the change to a free vertex of round-off weight (contact_point in
+// world/cloth_stages.cpp divides by the weights squared: ~1e15 m/s); block-Jacobi's solution
+// misses that configuration by luck. Without pinned vertices that share is bounded (the
+// weights sum to 1, so their squares sum to at least 1/3). Multigrid becomes the default for
+// pinned cloths too once that contact is bounded.
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);
@@ -304,7 +312,9 @@ Cloth::Cloth(const ClothDesc& desc)
   model_ = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
   pattern_ = std::make_shared<const cloth_detail::MatrixPattern>(*model_, free_index_);
   // the implicit solve's preconditioner: multigrid over the free vertices' edge graph
-  const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid;
+  const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid ||
+                         (desc.preconditioner == ClothPreconditioner::kAutomatic && free_count_ == n &&
+                          free_count_ >= kMultigridVertices);
   if (integrator_ == ClothIntegrator::kImplicit && free_count_ > 0 && multigrid) {
     std::vector<std::vector<int>> graph(free_count_);
     for (const cloth_detail::Edge& e : model_->edges()) {
