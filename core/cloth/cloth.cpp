@@ -93,9 +93,8 @@
 // preconditioner's 3x3-block copy of the matrix: 1.4x fewer bytes than Eigen's scalar one)
 // to a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
 // is a smoothed-aggregation multigrid V-cycle, whose iteration count stays nearly flat as
-// the mesh is refined, for unpinned cloths of 1,000 vertices or more; small and pinned cloths
-// keep block-Jacobi (its iterations grow as 1/h; why pinned ones: below, at
-// kMultigridVertices).
+// the mesh is refined, for cloths of 1,000 free vertices or more; small cloths keep
+// block-Jacobi (its iterations grow as 1/h; see kMultigridVertices).
 // (A sparse Cholesky factorization each step, SimplicialLDLT, was 10x slower on the 64 x 64
 // drape; see benchmarks/cloth.)
 // For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
@@ -163,20 +162,16 @@ constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
-constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices (and no pin)
-// Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more
-// and no pinned vertex; block-Jacobi otherwise. On the drape multigrid takes 4-9x fewer
-// iterations from 33 x 33 up, with a smaller profile error at 33-129; at 17 x 17 (289
-// vertices) block-Jacobi's cheaper iterations win, at no loss of accuracy there
-// (benchmarks/results/cloth_solve_speed.md). The 81 mm it once let cloth_demo's heavy body
-// press the cloth into the ground is gone since the pinch stage (0 mm over its 97 frames,
-// block-Jacobi 1.2 mm). Pinned cloths keep block-Jacobi: with multigrid the flag dies in its
-// first step, because a pole corner's contact against a triangle whose weight is all on a
-// pinned vertex hands the change to a free vertex of round-off weight (contact_point in
-// world/cloth_stages.cpp divides by the weights squared: ~1e15 m/s); block-Jacobi's solution
-// misses that configuration by luck. Without pinned vertices that share is bounded (the
-// weights sum to 1, so their squares sum to at least 1/3). Multigrid becomes the default for
-// pinned cloths too once that contact is bounded.
+constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices
+// Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more,
+// block-Jacobi otherwise. On the drape multigrid takes 4-9x fewer iterations from 33 x 33 up,
+// with a smaller profile error at 33-129; at 17 x 17 (289 vertices) block-Jacobi's cheaper
+// iterations win, at no loss of accuracy there (benchmarks/results/cloth_solve_speed.md). The
+// 81 mm it once let cloth_demo's heavy body press the cloth into the ground is gone since the
+// pinch stage (0 mm over its 97 frames, block-Jacobi 1.2 mm). Pinned cloths kept block-Jacobi
+// while a body's contact by the pins could hand its push to a free vertex of round-off weight
+// (the flag died in its first step with multigrid); that contact is now bounded
+// (world/cloth_stages.cpp, kMaxLever).
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);
@@ -313,8 +308,7 @@ Cloth::Cloth(const ClothDesc& desc)
   pattern_ = std::make_shared<const cloth_detail::MatrixPattern>(*model_, free_index_);
   // the implicit solve's preconditioner: multigrid over the free vertices' edge graph
   const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid ||
-                         (desc.preconditioner == ClothPreconditioner::kAutomatic && free_count_ == n &&
-                          free_count_ >= kMultigridVertices);
+                         (desc.preconditioner == ClothPreconditioner::kAutomatic && free_count_ >= kMultigridVertices);
   if (integrator_ == ClothIntegrator::kImplicit && free_count_ > 0 && multigrid) {
     std::vector<std::vector<int>> graph(free_count_);
     for (const cloth_detail::Edge& e : model_->edges()) {
@@ -478,6 +472,14 @@ void Cloth::limit_strain(double dt, bool global) {
   // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
   // 12 x 12 cloth can need hundreds of sweeps). The rest is solved for all edges at once.
   if (global) project_strain(dt);
+}
+
+void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
+  require(held.size() == pinned_.size(), "held: one flag per vertex");
+  const std::vector<char> pinned = pinned_;
+  for (size_t k = 0; k < held.size(); ++k) pinned_[k] = pinned_[k] || held[k];
+  limit_strain(dt, true);
+  pinned_ = pinned;
 }
 
 // Strain limiting for all edges at once: Newton iterations on the candidate lengths (the

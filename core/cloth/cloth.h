@@ -64,6 +64,8 @@ class Cloth {
   // stages (see the top of this file)
   void update_velocities(double dt, const Vec3& gravity);
   void limit_strain(double dt, bool global = true);
+  // the same with the vertices marked in `held` (n) held still as if pinned, for this call
+  void limit_strain_holding(double dt, const std::vector<char>& held);
   void update_positions(double dt);
 
   // the largest stable explicit substep (speed-of-sound limit) for the current material (s)
