@@ -184,7 +184,8 @@ PYBIND11_MODULE(_core, m) {
   // the world
   py::class_<World>(m, "World")
       .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
-                       double travel_fraction, int max_substeps, int threads, double cloth_max_substep) {
+                       double travel_fraction, int max_substeps, int threads, double cloth_max_substep,
+                       bool speculative_contacts, double contact_tolerance, bool box_contacts) {
              WorldSettings s;
              s.gravity = gravity;
              s.collision_sweeps = collision_sweeps;
@@ -194,6 +195,9 @@ PYBIND11_MODULE(_core, m) {
              s.max_substeps = max_substeps;
              s.threads = threads;
              s.cloth_max_substep = positive(cloth_max_substep, "cloth_max_substep");
+             s.speculative_contacts = speculative_contacts;
+             s.box_contacts = box_contacts;
+             s.contact_tolerance = positive(contact_tolerance, "contact_tolerance");
              positive(max_substep, "max_substep");
              positive(travel_fraction, "travel_fraction");
              return World(s);
@@ -205,7 +209,10 @@ PYBIND11_MODULE(_core, m) {
            py::arg("travel_fraction") = WorldSettings().travel_fraction,
            py::arg("max_substeps") = WorldSettings().max_substeps,
            py::arg("threads") = WorldSettings().threads,
-           py::arg("cloth_max_substep") = WorldSettings().cloth_max_substep)
+           py::arg("cloth_max_substep") = WorldSettings().cloth_max_substep,
+           py::arg("speculative_contacts") = WorldSettings().speculative_contacts,
+           py::arg("contact_tolerance") = WorldSettings().contact_tolerance,
+           py::arg("box_contacts") = WorldSettings().box_contacts)
       .def("set_ground", [](World& w, double height, double friction, double restitution) {
              w.set_ground(GroundDef{height, friction, restitution});
            }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)

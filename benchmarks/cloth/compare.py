@@ -89,7 +89,7 @@ RUNS_FULL = [
 SELF = ["--self-collision", "on"]
 RUNS_SELF = [
     *[("simbake", n, [], "default") for n in (17, 33, 65, 129, 257)],
-    *[("blender", n, SELF, "self-collision") for n in (17, 33, 65, 129)],
+    *[("blender", n, SELF, "self-collision") for n in (17, 33, 65, 129, 257)],
     *[("newton", n, SELF, "self-collision") for n in (17, 33, 65)],
     *[("mujoco", n, SELF, "self-collision") for n in (17, 33, 65)],
 ]

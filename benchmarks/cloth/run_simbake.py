@@ -13,8 +13,8 @@ Settings: the drape scene's material (stretch_stiffness 2000 N/m springs, bend_s
 friction 0.4 against the sphere's and the ground's 0.5: sqrt(0.4 x 0.5) = 0.447);
 --cloth-step is the world's cloth_max_substep (the longest implicit step; the explicit
 integrator takes its speed-of-sound step whatever it is), --tolerance the conjugate-gradient
-solve's relative residual, --preconditioner its preconditioner (automatic: multigrid
-from 200 free vertices, block-Jacobi below), --self-collision off the cloth's self-collision
+solve's relative residual, --preconditioner its preconditioner (automatic, the core's
+default: multigrid from 1,000 free vertices when none is pinned, block-Jacobi otherwise), --self-collision off the cloth's self-collision
 (on, the default, as the scene's). Only World.step_frame is timed; CPU time is reported beside wall
 time (cpu_seconds), as the peers' runners do.
 """

@@ -2,9 +2,10 @@
 
     /work/main/.venv/bin/python benchmarks/peers/run_simbake.py SCENE [--seconds S]
 
-Settings: the world's defaults (automatic substeps per 1/24 s frame: at most 1/240 s each,
-no body travels more than 0.2 of its thickness per substep; 5 collision sweeps, up to 10
-contact sweeps, shock propagation), every body with the scene's mu and e (the core combines
+Settings: the world's defaults (automatic substeps per 1/24 s frame: at most 1/120 s each,
+1/240 s while a body may bounce, no body travels more than 0.2 of its thickness per substep;
+speculative contacts, exact box-box contacts; 5 collision sweeps, up to 10 contact sweeps,
+shock propagation), every body with the scene's mu and e (the core combines
 friction by geometric mean and restitution by max, so the pair gets exactly mu and e).
 Boxes: LevelSet.box and box_mesh(size, 4) samples; spheres: LevelSet.sphere and
 sphere_mesh(r, 8) samples (as the pipeline's primitives). Only World.step_frame is timed.

@@ -88,11 +88,13 @@
 // only), so M + dt^2 H + damping dt H_m is symmetric positive definite. It is assembled
 // straight into an Eigen sparse matrix of fixed pattern (MatrixPattern, built once) over the
 // unpinned vertices only (pinned rows and columns removed: their velocity is zero and stays
-// so), scaled by M^-1/2 on both sides, and solved by preconditioned conjugate gradients to
-// a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
+// so), elastic and damping terms in one pass over the elements, scaled by M^-1/2 on both
+// sides, and solved by preconditioned conjugate gradients (our own loop, multiplying the
+// preconditioner's 3x3-block copy of the matrix: 1.4x fewer bytes than Eigen's scalar one)
+// to a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
 // is a smoothed-aggregation multigrid V-cycle, whose iteration count stays nearly flat as
-// the mesh is refined, for all but tiny cloths, which keep block-Jacobi (its iterations
-// grow as 1/h, but below 200 vertices they are few and cheap).
+// the mesh is refined, for cloths of 1,000 free vertices or more; small cloths keep
+// block-Jacobi (its iterations grow as 1/h; see kMultigridVertices).
 // (A sparse Cholesky factorization each step, SimplicialLDLT, was 10x slower on the 64 x 64
 // drape; see benchmarks/cloth.)
 // For a cloth with no pinned vertex, the net momentum error the solver leaves is removed
@@ -133,7 +135,6 @@
 #include "cloth/multigrid.h"
 #include "geometry/mesh.h"
 
-#include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCholesky>
 #include <Eigen/Sparse>
 
@@ -142,48 +143,10 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 
 #include <time.h>
 
 namespace simbake {
-
-// Eigen's preconditioner concept over the cloth's Preconditioner (cloth/multigrid.h):
-// ConjugateGradient calls solve(r) once per iteration for z = P^-1 r. The preconditioner's
-// values are updated by the caller (Preconditioner::update) before the solve.
-class PreconditionerAdapter {
- public:
-  using StorageIndex = int;
-  enum { ColsAtCompileTime = Eigen::Dynamic, MaxColsAtCompileTime = Eigen::Dynamic };
-  void attach(const cloth_detail::Preconditioner* p, Eigen::Index size) { p_ = p; size_ = size; }
-  template <class MatrixType>
-  PreconditionerAdapter& analyzePattern(const MatrixType&) { return *this; }
-  template <class MatrixType>
-  PreconditionerAdapter& factorize(const MatrixType&) { return *this; }
-  template <class MatrixType>
-  PreconditionerAdapter& compute(const MatrixType&) { return *this; }
-  template <class Rhs, class Dest>
-  void _solve_impl(const Rhs& b, Dest& x) const {
-    if constexpr (std::is_same_v<Rhs, Eigen::VectorXd> && std::is_same_v<Dest, Eigen::VectorXd>) {
-      p_->apply(b, x);
-    } else {
-      Eigen::VectorXd z;
-      p_->apply(Eigen::VectorXd(b), z);
-      x = z;
-    }
-  }
-  template <class Rhs>
-  inline const Eigen::Solve<PreconditionerAdapter, Rhs> solve(const Eigen::MatrixBase<Rhs>& b) const {
-    return Eigen::Solve<PreconditionerAdapter, Rhs>(*this, b.derived());
-  }
-  Eigen::ComputationInfo info() { return Eigen::Success; }
-  Eigen::Index rows() const { return size_; }
-  Eigen::Index cols() const { return size_; }
-
- private:
-  const cloth_detail::Preconditioner* p_ = nullptr;
-  Eigen::Index size_ = 0;
-};
 
 namespace {
 
@@ -199,12 +162,16 @@ constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
-// Automatic preconditioner: block-Jacobi. Multigrid (ClothPreconditioner::kMultigrid) solves
-// the drape 7x faster at 257 x 257 with flat iterations (benchmarks/results/cloth_scaling.md),
-// but truncated at the same residual its error is distributed differently, and the contact
-// stages that follow the solve do not hold against it yet: on cloth_demo a heavy body then
-// presses the cloth 81 mm into the ground (block-Jacobi: 11.7 mm) with 25.7% strain, and the
-// heap lands 14 mm deep (3.4). It becomes the default once contacts are inside the solve.
+constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices
+// Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more,
+// block-Jacobi otherwise. On the drape multigrid takes 4-9x fewer iterations from 33 x 33 up,
+// with a smaller profile error at 33-129; at 17 x 17 (289 vertices) block-Jacobi's cheaper
+// iterations win, at no loss of accuracy there (benchmarks/results/cloth_solve_speed.md). The
+// 81 mm it once let cloth_demo's heavy body press the cloth into the ground is gone since the
+// pinch stage (0 mm over its 97 frames, block-Jacobi 1.2 mm). Pinned cloths kept block-Jacobi
+// while a body's contact by the pins could hand its push to a free vertex of round-off weight
+// (the flag died in its first step with multigrid); that contact is now bounded
+// (world/cloth_stages.cpp, kMaxLever).
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);
@@ -220,6 +187,48 @@ double thread_cpu_seconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
+// Preconditioned conjugate gradients on the system p was last updated with (p.matrix(),
+// multiplied in 3x3 blocks), from zero until |b - A z| < tolerance |b| or
+// kMaxSolverIterations; returns the iterations, counted as Eigen's ConjugateGradient counts
+// them (the products after the first). The vector operations of each iteration are fused
+// into two passes (the product with the step's dot product, the update with the residual's
+// norm); everything runs in a fixed order, so the result has the same bits on any thread.
+int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::VectorXd& b, double tolerance,
+                        Eigen::VectorXd& z) {
+  const cloth_detail::BlockMatrix& a = p.matrix();
+  const Eigen::Index size = b.size();
+  z.setZero(size);
+  const double goal = tolerance * tolerance * b.squaredNorm();
+  if (goal == 0.0) return 0;
+  Eigen::VectorXd r = b, direction, product(size), s;
+  p.apply(r, direction);
+  double rs = r.dot(direction);
+  for (int iteration = 0; iteration < kMaxSolverIterations; ++iteration) {
+    // q = A d and d . q in one pass over the blocks
+    double dq = 0.0;
+    for (int i = 0; i < a.size; ++i) {
+      Vec3 q = Vec3::Zero();
+      for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block[k] * direction.segment<3>(3 * a.column[k]);
+      product.segment<3>(3 * i) = q;
+      dq += q.dot(direction.segment<3>(3 * i));
+    }
+    const double alpha = rs / dq;
+    double r2 = 0.0;
+    for (Eigen::Index k = 0; k < size; ++k) {
+      z[k] += alpha * direction[k];
+      r[k] -= alpha * product[k];
+      r2 += r[k] * r[k];
+    }
+    if (r2 < goal) return iteration;
+    p.apply(r, s);
+    const double previous = rs;
+    rs = r.dot(s);
+    const double beta = rs / previous;
+    for (Eigen::Index k = 0; k < size; ++k) direction[k] = s[k] + beta * direction[k];
+  }
+  return kMaxSolverIterations;
+}
+
 // The length an edge of rest length `rest` must have when its candidate length is `length`:
 // (1 + limit) rest when stretched beyond that, rest under kEnforce when compressed beyond
 // the threshold, or -1 when it is within its bounds
@@ -229,24 +238,18 @@ double strain_target(double length, double rest, double limit, bool enforce) {
   return -1.0;
 }
 
-// Damping force -damping H_m(x_mid) v and, if asked, its matrix weight x H_m, evaluated at
-// the midpoint x + dt/2 v of the coming step. For a rigid rotation by an angle a per step,
-// the edge-length rate that damping sees is then O(a^3) of the rotation's own velocities;
-// at x or at x + dt v it would be O(a), which times a large stiffness visibly slows spins.
-void add_damping(const cloth_detail::ForceModel& model, double damping, const Points& x, const Points& v,
-                 double dt, double matrix_weight, Eigen::VectorXd& force, const cloth_detail::MatrixPattern* pattern,
-                 Eigen::SparseMatrix<double>* matrix) {
+// Damping, -damping H_m(x_mid) v, with its matrix weight x H_m when asked: H_m evaluated at
+// the midpoint x + dt/2 v of the coming step, in the same pass over the elements as the
+// elastic terms (Assembly::material_at). For a rigid rotation by an angle a per step, the
+// edge-length rate that damping sees is then O(a^3) of the rotation's own velocities; at x
+// or at x + dt v it would be O(a), which times a large stiffness visibly slows spins.
+void set_damping(double damping, const Points& v, const Points& midpoint, double matrix_weight,
+                 cloth_detail::Assembly& what) {
   if (damping == 0.0) return;
-  const Points midpoint = x + (0.5 * dt) * v;
-  cloth_detail::Assembly what;
-  what.elastic = false;
   what.velocity = &v;
   what.damping = damping;
   what.material_weight = matrix_weight;
-  what.force = &force;
-  what.pattern = pattern;
-  what.matrix = matrix;
-  model.assemble(midpoint, what);
+  what.material_at = &midpoint;
 }
 
 }  // namespace
@@ -304,7 +307,8 @@ Cloth::Cloth(const ClothDesc& desc)
   model_ = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
   pattern_ = std::make_shared<const cloth_detail::MatrixPattern>(*model_, free_index_);
   // the implicit solve's preconditioner: multigrid over the free vertices' edge graph
-  const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid;
+  const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid ||
+                         (desc.preconditioner == ClothPreconditioner::kAutomatic && free_count_ >= kMultigridVertices);
   if (integrator_ == ClothIntegrator::kImplicit && free_count_ > 0 && multigrid) {
     std::vector<std::vector<int>> graph(free_count_);
     for (const cloth_detail::Edge& e : model_->edges()) {
@@ -352,8 +356,9 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity) {
   Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * vertex_count());
   cloth_detail::Assembly what;
   what.force = &force;
+  const Points midpoint = x_ + (0.5 * dt) * v_;
+  set_damping(material_.damping, v_, midpoint, 0.0, what);
   model_->assemble(x_, what);
-  add_damping(*model_, material_.damping, x_, v_, dt, 0.0, force, nullptr, nullptr);
   for (int k = 0; k < vertex_count(); ++k) {
     if (pinned_[k]) continue;
     v_.row(k) += dt * (force.segment<3>(3 * k) / mass_[k] + gravity).transpose();
@@ -369,16 +374,17 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
   Eigen::SparseMatrix<double>& system = system_;
   if (system.rows() == 0) system = pattern_->make_matrix();
   system.coeffs().setZero();
-  // elastic forces at the prediction and their Hessian, then damping at the midpoint
+  // elastic forces at the prediction and their Hessian, damping at the midpoint
   Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * n);
   const Points predicted = x_ + dt * v_;
+  const Points midpoint = x_ + (0.5 * dt) * v_;
   cloth_detail::Assembly what;
   what.hessian_weight = dt * dt;
   what.force = &force;
   what.pattern = pattern_.get();
   what.matrix = &system;
+  set_damping(material_.damping, v_, midpoint, material_.damping * dt, what);
   model_->assemble(predicted, what);
-  add_damping(*model_, material_.damping, x_, v_, dt, material_.damping * dt, force, pattern_.get(), &system);
   // the mass diagonal and the right-hand side, over free vertices only; the system is
   // scaled by M^-1/2 on both sides (unknown z = M^1/2 dv), so that the residual is measured
   // in the norm that bounds the velocity error in kinetic-energy terms, |e|_M <= |r|_(M^-1)
@@ -402,13 +408,8 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity) {
   if (preconditioner_.use_count() > 1) preconditioner_ = preconditioner_->clone();
   const double solve_start = thread_cpu_seconds();
   preconditioner_->update(system);
-  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper, PreconditionerAdapter> cg;
-  cg.setTolerance(tolerance_);
-  cg.setMaxIterations(kMaxSolverIterations);
-  cg.preconditioner().attach(preconditioner_.get(), system.rows());
-  cg.compute(system);
-  const Eigen::VectorXd z = cg.solve(rhs);
-  solver_iterations_ += cg.iterations();
+  Eigen::VectorXd z;
+  solver_iterations_ += conjugate_gradients(*preconditioner_, rhs, tolerance_, z);
   solver_seconds_ += thread_cpu_seconds() - solve_start;
   Eigen::VectorXd dv = scale.asDiagonal() * z;
   // With no vertex pinned the exact dv changes the total momentum by exactly dt M g (the
@@ -471,6 +472,14 @@ void Cloth::limit_strain(double dt, bool global) {
   // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
   // 12 x 12 cloth can need hundreds of sweeps). The rest is solved for all edges at once.
   if (global) project_strain(dt);
+}
+
+void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
+  require(held.size() == pinned_.size(), "held: one flag per vertex");
+  const std::vector<char> pinned = pinned_;
+  for (size_t k = 0; k < held.size(); ++k) pinned_[k] = pinned_[k] || held[k];
+  limit_strain(dt, true);
+  pinned_ = pinned;
 }
 
 // Strain limiting for all edges at once: Newton iterations on the candidate lengths (the

@@ -30,7 +30,8 @@ class Preconditioner; // cloth/multigrid.h: z = P^-1 r for the implicit system's
 enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
 enum class ClothIntegrator { kExplicit, kImplicit };
-// the implicit solve's preconditioner: automatic = block-Jacobi (cloth.cpp says why)
+// the implicit solve's preconditioner: automatic = multigrid from 1,000 free vertices when none is
+// pinned, else block-Jacobi (cloth.cpp says why)
 enum class ClothPreconditioner { kAutomatic, kBlockJacobi, kMultigrid };
 
 struct ClothMaterial {
@@ -63,6 +64,8 @@ class Cloth {
   // stages (see the top of this file)
   void update_velocities(double dt, const Vec3& gravity);
   void limit_strain(double dt, bool global = true);
+  // the same with the vertices marked in `held` (n) held still as if pinned, for this call
+  void limit_strain_holding(double dt, const std::vector<char>& held);
   void update_positions(double dt);
 
   // the largest stable explicit substep (speed-of-sound limit) for the current material (s)

@@ -400,6 +400,9 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
   // which Hessians are needed at all
   const bool need_hessian = matrix && what.hessian_weight != 0.0;
   const bool need_material = (matrix && what.material_weight != 0.0) || (velocity_terms && what.damping != 0.0);
+  // the material Hessian's positions, when they are not x
+  const Points* at = what.material_at;
+  const bool elsewhere = at != nullptr && at != &x;
 
   // in-plane: springs along every edge (stretch, and shear along the diagonals)
   if (!what.stretch) {
@@ -409,7 +412,10 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
     Mat6 hessian = Mat6::Zero(), material = Mat6::Zero();
     for (const Edge& e : edges_) {
       spring_terms(row(x, e.i), row(x, e.j), e.rest, e.stiffness, compress_scale_, &gradient,
-                   need_hessian ? &hessian : nullptr, need_material ? &material : nullptr);
+                   need_hessian ? &hessian : nullptr, need_material && !elsewhere ? &material : nullptr);
+      if (need_material && elsewhere) {
+        spring_terms(row(*at, e.i), row(*at, e.j), e.rest, e.stiffness, compress_scale_, nullptr, nullptr, &material);
+      }
       const int v[2] = {e.i, e.j};
       scatter<2>(v, gradient, hessian, material, matrix ? what.pattern->edge_slots(&e - edges_.data()) : nullptr, what);
     }
@@ -419,7 +425,11 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
     Mat9 hessian = Mat9::Zero(), material = Mat9::Zero();
     for (const MembraneElement& m : membranes_) {
       membrane_terms(row(x, m.v[0]), row(x, m.v[1]), row(x, m.v[2]), m.rest, lame_, compress_scale_, &gradient,
-                     need_hessian ? &hessian : nullptr, need_material ? &material : nullptr);
+                     need_hessian ? &hessian : nullptr, need_material && !elsewhere ? &material : nullptr);
+      if (need_material && elsewhere) {
+        membrane_terms(row(*at, m.v[0]), row(*at, m.v[1]), row(*at, m.v[2]), m.rest, lame_, compress_scale_, nullptr,
+                       nullptr, &material);
+      }
       if (need_hessian) hessian = project_psd(hessian);
       scatter<3>(m.v, gradient, hessian, material, matrix ? what.pattern->membrane_slots(&m - membranes_.data()) : nullptr, what);
     }
@@ -427,15 +437,20 @@ void ForceModel::assemble(const Points& x, const Assembly& what) const {
 
   // bending: W = 1/2 B w (theta - theta0)^2 per hinge; Gauss-Newton Hessian B w grad grad^T
   if (material_.bend_stiffness == 0.0 || !what.bend) return;
-  const bool need_gauss_newton = need_hessian || need_material;
-  Mat12 gauss_newton = Mat12::Zero();
+  const bool need_gauss_newton = need_hessian || (need_material && !elsewhere);
+  const bool elastic_force = what.force != nullptr && what.elastic;
+  Mat12 gauss_newton = Mat12::Zero(), material = Mat12::Zero();
   for (const Hinge& h : hinges_) {
     const Vec3 p0 = row(x, h.v[0]), p1 = row(x, h.v[1]), p2 = row(x, h.v[2]), p3 = row(x, h.v[3]);
     const double k = material_.bend_stiffness * h.weight;
-    const double d = angle_difference(dihedral_angle(p0, p1, p2, p3), h.rest_angle);
+    const double d = elastic_force ? angle_difference(dihedral_angle(p0, p1, p2, p3), h.rest_angle) : 0.0;
     const Vec12 grad_theta = dihedral_angle_gradient(p0, p1, p2, p3);
     if (need_gauss_newton) gauss_newton = k * grad_theta * grad_theta.transpose();
-    scatter<4>(h.v, Vec12(k * d * grad_theta), gauss_newton, gauss_newton,
+    if (need_material && elsewhere) {
+      const Vec12 g = dihedral_angle_gradient(row(*at, h.v[0]), row(*at, h.v[1]), row(*at, h.v[2]), row(*at, h.v[3]));
+      material = k * g * g.transpose();
+    }
+    scatter<4>(h.v, Vec12(k * d * grad_theta), gauss_newton, elsewhere ? material : gauss_newton,
                matrix ? what.pattern->hinge_slots(&h - hinges_.data()) : nullptr, what);
   }
 }

@@ -116,6 +116,7 @@ struct Assembly {
   bool elastic = true;               // force += -dW/dx
   const Points* velocity = nullptr;  // needed by damping
   double damping = 0.0;              // force += -damping * H_material v (Rayleigh, stiffness-proportional)
+  const Points* material_at = nullptr;  // where H_material is evaluated (damping's force and matrix); null: x
   double hessian_weight = 0.0;       // matrix += hessian_weight * H (clamped, PSD)
   double material_weight = 0.0;      // matrix += material_weight * H_material
   Eigen::VectorXd* force = nullptr;  // (3n) += internal forces

@@ -190,20 +190,49 @@ void invert_diagonal(const BlockMatrix& m, std::vector<Mat3, Eigen::aligned_allo
 
 }  // namespace
 
+// ---- block matrices
+
+BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern) {
+  // block column b of the Eigen matrix holds the blocks (j, b), 3 rows each, at the same
+  // offset in its three columns; for a symmetric matrix they are row b's blocks, transposed
+  const int n = static_cast<int>(pattern.cols() / 3);
+  std::vector<std::vector<int>> rows(n);
+  std::vector<int> source, stride;
+  const int* outer = pattern.outerIndexPtr();
+  const int* inner = pattern.innerIndexPtr();
+  for (int b = 0; b < n; ++b) {
+    for (int k = outer[3 * b]; k < outer[3 * b + 1]; k += 3) {
+      rows[b].push_back(inner[k] / 3);
+      source.push_back(k);
+      stride.push_back(outer[3 * b + 1] - outer[3 * b]);
+    }
+  }
+  BlockMatrix m = block_pattern(rows);
+  m.source = std::move(source);
+  m.stride = std::move(stride);
+  return m;
+}
+
+void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
+  const double* values = a.valuePtr();
+  for (size_t k = 0; k < m.block.size(); ++k) {
+    const double* v = values + m.source[k];
+    const int s = m.stride[k];
+    Mat3& block = m.block[k];
+    for (int c = 0; c < 3; ++c) {
+      for (int r = 0; r < 3; ++r) block(c, r) = v[c * s + r];
+    }
+  }
+}
+
 // ---- block-Jacobi
 
 void BlockJacobi::update(const Eigen::SparseMatrix<double>& a) {
-  const Eigen::Index blocks = a.cols() / 3;
-  inverse_.resize(blocks);
-  for (Eigen::Index b = 0; b < blocks; ++b) {
-    Mat3 block = Mat3::Zero();
-    for (int c = 0; c < 3; ++c) {
-      for (Eigen::SparseMatrix<double>::InnerIterator it(a, 3 * b + c); it; ++it) {
-        if (it.row() >= 3 * b && it.row() < 3 * b + 3) block(it.row() - 3 * b, c) = it.value();
-      }
-    }
-    inverse_[b] = block.inverse();
+  if (matrix_.size != a.cols() / 3 || matrix_.block.size() * 9 != static_cast<size_t>(a.nonZeros())) {
+    matrix_ = block_matrix(a);
   }
+  copy_values(a, matrix_);
+  invert_diagonal(matrix_, inverse_);
 }
 
 void BlockJacobi::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
@@ -215,21 +244,9 @@ void BlockJacobi::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
 
 Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vector<std::vector<int>>& edges,
                      const Eigen::VectorXd& scale) {
-  // level 0: block column b of the Eigen matrix holds the blocks (j, b), 3 rows each, at the
-  // same offset in its three columns
   const int n = static_cast<int>(pattern.cols() / 3);
   if (static_cast<int>(edges.size()) != n || scale.size() != n) throw std::invalid_argument("multigrid: one edge list and scale per block");
-  std::vector<std::vector<int>> rows(n);
-  const int* outer = pattern.outerIndexPtr();
-  const int* inner = pattern.innerIndexPtr();
-  for (int b = 0; b < n; ++b) {
-    for (int k = outer[3 * b]; k < outer[3 * b + 1]; k += 3) {
-      rows[b].push_back(inner[k] / 3);
-      fine_slot_.push_back(k);
-      fine_stride_.push_back(outer[3 * b + 1] - outer[3 * b]);
-    }
-  }
-  matrix_.push_back(block_pattern(rows));
+  matrix_.push_back(block_matrix(pattern));
   Graph graph = edges;
   for (std::vector<int>& row : graph) {
     std::sort(row.begin(), row.end());
@@ -324,18 +341,7 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
 // ---- multigrid: the values (every step)
 
 void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
-  // level 0 from the Eigen matrix: the entry for (i, j) is block (j, i) there, transposed
-  // (the same for a symmetric matrix)
-  BlockMatrix& fine = matrix_[0];
-  const double* values = a.valuePtr();
-  for (size_t k = 0; k < fine.block.size(); ++k) {
-    const double* v = values + fine_slot_[k];
-    const int s = fine_stride_[k];
-    Mat3& m = fine.block[k];
-    for (int c = 0; c < 3; ++c) {
-      for (int r = 0; r < 3; ++r) m(c, r) = v[c * s + r];
-    }
-  }
+  copy_values(a, matrix_[0]);
   // Galerkin products level by level: B = A P, then A_(l+1) = P^T B
   for (size_t l = 0; l + 1 < matrix_.size(); ++l) {
     BlockMatrix& b = product_[l];

@@ -6,11 +6,12 @@
 //   Multigrid    one V-cycle of smoothed-aggregation algebraic multigrid (multigrid.cpp, its
 //                method and formulas at the top); the iteration count stays nearly flat
 // A conjugate-gradient loop calls update() once per step (new values, same pattern), then
-// apply() once per iteration. Both are symmetric positive definite linear maps, so they are
-// valid CG preconditioners, also when a filter S (Baraff-Witkin's constraint projection) is
-// applied after them: S P^-1 S is symmetric positive semi-definite on the filtered space.
-// With a filter, pass update() the filtered matrix S A S + I - S (the same pattern, S being
-// block diagonal) rather than A: the V-cycle then approximates the constrained inverse
+// apply() once per iteration, and multiplies by matrix(), the same system in 3x3 blocks.
+// Both are symmetric positive definite linear maps, so they are valid CG preconditioners,
+// also when a filter S (Baraff-Witkin's constraint projection) is applied after them:
+// S P^-1 S is symmetric positive semi-definite on the filtered space. With a filter, pass
+// update() the filtered matrix S A S + I - S (the same pattern, S being block diagonal)
+// rather than A: the V-cycle then approximates the constrained inverse
 // (7 iterations instead of 43 in ClothMultigrid.FilteredSolveMatchesDirectSolve).
 // Private to core/cloth.
 #pragma once
@@ -26,29 +27,6 @@
 
 namespace simbake::cloth_detail {
 
-class Preconditioner {
- public:
-  virtual ~Preconditioner() = default;
-  // new values of the system matrix (full symmetric storage, 3x3 blocks, the pattern the
-  // preconditioner was built for)
-  virtual void update(const Eigen::SparseMatrix<double>& a) = 0;
-  // z = P^-1 r (r and z of the matrix's size; z is overwritten)
-  virtual void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const = 0;
-  // a copy with its own scratch (Cloth copies share one until they solve)
-  virtual std::unique_ptr<Preconditioner> clone() const = 0;
-};
-
-// z_b = A_bb^-1 r_b per vertex block b
-class BlockJacobi final : public Preconditioner {
- public:
-  void update(const Eigen::SparseMatrix<double>& a) override;
-  void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
-  std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<BlockJacobi>(*this); }
-
- private:
-  std::vector<Mat3, Eigen::aligned_allocator<Mat3>> inverse_;  // (blocks) inverses of the diagonal blocks
-};
-
 // A symmetric 3x3-block sparse matrix, block rows in compressed form (full storage)
 struct BlockMatrix {
   int size = 0;                                       // block rows (= block columns)
@@ -59,6 +37,42 @@ struct BlockMatrix {
   // (entries) the values in single precision, which the V-cycle reads: it is bound by
   // memory traffic, and a preconditioner needs no more digits than its own error
   std::vector<Eigen::Matrix3f, Eigen::aligned_allocator<Eigen::Matrix3f>> block_f;
+  // (entries) where each block's values sit in the Eigen matrix it is copied from
+  // (copy_values): its (0, 0) entry, and the distance between its three columns there
+  std::vector<int> source, stride;
+};
+
+// The block matrix of an Eigen matrix's pattern (full symmetric storage, dense 3x3 blocks),
+// values zero, with the positions copy_values reads
+BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern);
+// m's values from a matrix of the pattern m was made from
+void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m);
+
+class Preconditioner {
+ public:
+  virtual ~Preconditioner() = default;
+  // new values of the system matrix (full symmetric storage, 3x3 blocks, the pattern the
+  // preconditioner was built for)
+  virtual void update(const Eigen::SparseMatrix<double>& a) = 0;
+  // z = P^-1 r (r and z of the matrix's size; z is overwritten)
+  virtual void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const = 0;
+  // the matrix of the last update(), in 3x3 blocks (what the conjugate gradients multiply by)
+  virtual const BlockMatrix& matrix() const = 0;
+  // a copy with its own scratch (Cloth copies share one until they solve)
+  virtual std::unique_ptr<Preconditioner> clone() const = 0;
+};
+
+// z_b = A_bb^-1 r_b per vertex block b
+class BlockJacobi final : public Preconditioner {
+ public:
+  void update(const Eigen::SparseMatrix<double>& a) override;
+  void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
+  const BlockMatrix& matrix() const override { return matrix_; }
+  std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<BlockJacobi>(*this); }
+
+ private:
+  BlockMatrix matrix_;                                          // the system (its pattern from the first update)
+  std::vector<Mat3, Eigen::aligned_allocator<Mat3>> inverse_;  // (blocks) inverses of the diagonal blocks
 };
 
 // One level's prolongation: fine block i takes sum over its entries (coarse J, weight w) of
@@ -82,6 +96,7 @@ class Multigrid final : public Preconditioner {
 
   void update(const Eigen::SparseMatrix<double>& a) override;
   void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
+  const BlockMatrix& matrix() const override { return matrix_[0]; }
   std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<Multigrid>(*this); }
 
   int levels() const { return static_cast<int>(matrix_.size()); }
@@ -95,8 +110,6 @@ class Multigrid final : public Preconditioner {
   };
   std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
   std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
-  std::vector<int> fine_slot_;                // (entries of level 0) position of each block's (0, 0) in the Eigen matrix
-  std::vector<int> fine_stride_;              // (entries of level 0) distance between its columns there
   std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l
   std::vector<Recipe> right_, left_;          // (levels - 1) A P from A, then P^T (A P)
   std::vector<std::vector<Mat3, Eigen::aligned_allocator<Mat3>>> inverse_diagonal_;  // per level

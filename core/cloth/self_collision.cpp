@@ -929,7 +929,8 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
   // 3. rigid impact zones until nothing collides
   std::vector<int> parent(vertex_count_);
   std::iota(parent.begin(), parent.end(), 0);
-  std::vector<char> in_zone(vertex_count_, 0);
+  in_zone_.assign(vertex_count_, 0);
+  std::vector<char>& in_zone = in_zone_;
   const auto find = [&](int i) {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
     return i;

@@ -94,6 +94,8 @@ class SelfCollision {
   // 3. rigid impact zones until nothing collides (or, at last, the cloth held still)
   void impact_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                     const SelfCollisionSettings& settings, SelfCollisionStatistics& stats);
+  // (n) 1 for the vertices the last impact_zones moved rigidly
+  const std::vector<char>& zone_vertices() const { return in_zone_; }
 
   // A contact of the continuous detection: a point against a triangle (vertices a = the point,
   // then the triangle's) or an edge against an edge (a0 a1, then b0 b1), at a time in [0, 1]
@@ -156,6 +158,7 @@ class SelfCollision {
   Candidates candidates_;
   Start start_;
   Passes passes_;
+  std::vector<char> in_zone_;
   Triangles triangles_;
   std::vector<std::array<int, 2>> edges_;
   int vertex_count_;

@@ -8,6 +8,7 @@
 
 #include "math/types.h"
 
+#include <limits>
 #include <memory>
 
 namespace simbake {
@@ -21,6 +22,9 @@ class SignedDistance {
   virtual double phi_and_normal(const Vec3& p, Vec3& normal) const = 0;
   // box that contains the whole zero level set (the solid)
   virtual Box3 bounds() const = 0;
+  // how far outside the surface phi and the normal are still the distance and its gradient
+  // (m): everywhere for the analytic shapes, the exterior band less a voxel for a grid
+  virtual double exterior_reach() const { return std::numeric_limits<double>::infinity(); }
 };
 
 using SignedDistancePtr = std::shared_ptr<const SignedDistance>;

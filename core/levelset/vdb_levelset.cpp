@@ -257,6 +257,9 @@ Box3 VdbLevelSet::bounds() const {
   return b;
 }
 
+// (the grid's interpolant is exact while all eight corners of a cell lie in the band)
+double VdbLevelSet::exterior_reach() const { return std::max(0.0, impl_->band - voxel_size()); }
+
 double VdbLevelSet::voxel_size() const { return impl_->xform->voxelSize()[0]; }
 
 std::size_t VdbLevelSet::active_voxel_count() const {

@@ -37,6 +37,7 @@ class VdbLevelSet final : public SignedDistance {
   double phi_and_normal(const Vec3& p, Vec3& normal) const override;
   // box containing the zero level set (the active voxels shrunk by the band less one voxel)
   Box3 bounds() const override;
+  double exterior_reach() const override;
 
   double voxel_size() const;
   std::size_t active_voxel_count() const;

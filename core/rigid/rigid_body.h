@@ -92,7 +92,8 @@ Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state);
 // the free rigid body into exact rotations about the three principal axes, composed
 // symmetrically: 1/2, 2/2, 3, 2/2, 1/2 steps). L is conserved exactly, the energy error stays
 // bounded (symplectic, time reversible), and the intermediate-axis instability appears as it
-// should. McLachlan 1993; Touma and Wisdom 1994.
+// should. McLachlan 1993; Touma and Wisdom 1994. A step turning the body more than 0.03 rad
+// about an axis is taken in equal pieces (the error grows with the square of the turn).
 Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt);
 
 // Rotation of a kinematic body spinning at a fixed world angular velocity omega over dt

@@ -254,7 +254,7 @@ void World::update_sleeping(double dt) {
   }
   for (const ContactPoint& contact : contacts_) {
     const int a = contact.point.a, b = contact.point.b;
-    if (b == kGround || defs_[a].kinematic || defs_[b].kinematic) continue;
+    if (contact.apart || b == kGround || defs_[a].kinematic || defs_[b].kinematic) continue;
     const int ra = find_island(a), rb = find_island(b);
     if (ra != rb) island_[std::max(ra, rb)] = std::min(ra, rb);
   }

@@ -31,12 +31,17 @@ namespace simbake {
 
 namespace {
 constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
-constexpr double kStrainSlack = 0.01;      // a pass is enough once no edge is past the limit by 1% of it
+constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+constexpr double kFinalSlack = 0.002;      // the end-of-step rounds: done once no edge is past the limit by 0.2% of it
+                                           // (within the QA's and the render-ready test's 1%)
 constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its two surfaces apart per step
 constexpr double kPinchGap = 3.0;          // x h: the gap a pinch holds open
 constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
 constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
+constexpr int kZoneRounds = 3;             // impact zones, then strain limiting around them, in turn (at most)
+constexpr double kMaxLever = 4.0;         // a contact moves no cloth vertex faster than this many times its
+                                          // point's velocity change (see collide_cloth's contact_point)
 }  // namespace
 
 int World::add_cloth(const ClothDesc& desc, double friction, double thickness, bool self_collision) {
@@ -120,12 +125,25 @@ void World::step_cloths(double dt) {
       for (int round = 0; round < kFinalRounds; ++round) {
         limit_strain(true);
         clear = collide_self(2);
-        if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kStrainSlack))) break;
+        if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kFinalSlack))) break;
       }
-      if (!clear) {
-        ScopedTimer timer(profile_.cloth_self_collision);
-        self->impact_zones(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
-                           stats_.self_collision);
+      // impact zones move their vertices rigidly, which stretches the edges from a zone to
+      // the cloth around it (the heap's landing reached 22%): those edges are limited again
+      // with the zones held still (only the vertices around them move), and what that brings
+      // into collision joins a zone in turn; the zones have the last word
+      for (int round = 0; round < kZoneRounds && !clear; ++round) {
+        {
+          ScopedTimer timer(profile_.cloth_self_collision);
+          self->impact_zones(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
+                             stats_.self_collision);
+        }
+        if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kFinalSlack)) break;
+        if (round + 1 == kZoneRounds) break;
+        {
+          ScopedTimer timer(profile_.cloth_strain);
+          cloth.limit_strain_holding(dt, self->zone_vertices());
+        }
+        clear = collide_self(1);
       }
     }
     hold_pinched_bodies(c, dt);
@@ -205,7 +223,7 @@ void World::collide_cloth(int c, double dt) {
   const Eigen::VectorXd& inverse_mass = cloth_inverse_mass_[c];
   auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc,
                            const Vec3& normal, double phi, double mu) {
-    double denom = 0.0, weight = 0.0;
+    double denom = 0.0, weight = 0.0, lever = 0.0;
     Vec3 point_velocity = Vec3::Zero();
     for (int i = 0; i < count; ++i) {
       denom += w[i] * w[i] * inverse_mass[ids[i]];
@@ -213,6 +231,14 @@ void World::collide_cloth(int c, double dt) {
       point_velocity += w[i] * v.row(ids[i]).transpose();
     }
     if (denom <= 0.0) return;
+    // how much faster than the point its fastest vertex must move: 1 for a vertex or a point
+    // of a free triangle, 3 at the centroid of a triangle with two pinned vertices, and
+    // without bound as the point nears a pinned vertex (a lever about the pins: a flag pole's
+    // corner on a triangle by the pins sent its free vertex to 1e15 m/s). Past kMaxLever the
+    // pins hold the point: scaling the push down instead only spread the blow-up over the
+    // strain-collision passes, each pushing again while the point stays inside
+    for (int i = 0; i < count; ++i) lever = std::max(lever, w[i] * inverse_mass[ids[i]] / denom);
+    if (lever > kMaxLever) return;
     Vec3 body_velocity = Vec3::Zero();
     if (body >= 0) {
       const Vec3 omega = defs_[body].kinematic ? spin_[body] : angular_velocity(defs_[body], states_[body]);

@@ -152,9 +152,12 @@ Pose World::pose_at(int i, double s) const {
   return mesh_pose(defs_[i], between);
 }
 
-void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const {
+void World::find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const {
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
   const long long tests = sweep_tests(a, b);
+  // (a fast pair reports the first fraction with a point inside: no margin there, and its
+  // samples, not the boxes' exact contact: the impacts of the swept test are the samples')
+  if (tests > 1) margin = 0.0;
   long long first = 1, last = tests;
   if (tests > 1) {
     // only while the bounding spheres meet: |d0 + s dd| <= R_a + R_b for the centres' offset
@@ -173,13 +176,21 @@ void World::find_penetrations(int a, int b, std::vector<Penetration>& out) const
     }
   }
   for (long long k = first; k <= last; ++k) {
-    if (samples_inside(a, b, static_cast<double>(k) / tests, out)) return;
+    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, tests == 1, out)) return;
   }
 }
 
-// Appends a's samples inside b at fraction s of the step; true when there were any
-bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out) const {
+// Appends a's samples inside b at fraction s of the step, and with a margin > 0 those outside
+// closer than the margin too (but none within kTouching of the surface, see below); true when
+// there were any. With exact_boxes, two boxes meet by box_pair_contact instead
+bool World::samples_inside(int a, int b, double s, double margin, bool exact_boxes,
+                           std::vector<Penetration>& out) const {
   const std::size_t before = out.size();
+  switch (exact_boxes ? box_pair_contact(a, b, s, margin, out) : 0) {
+    case 1: return out.size() > before;
+    case 2: return false;  // (the pair's other direction found them)
+    default: break;
+  }
   const Pose pose_a = pose_at(a, s);
   const Points& samples = defs_[a].samples;
   // cull in a's mesh frame: only samples within b's bounding sphere (or below the ground
@@ -190,18 +201,20 @@ bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out
   Pose pose_b;
   if (b == kGround) {
     down_in_a = pose_a.rotation.transpose() * Vec3::UnitY();  // world y of a mesh point m: m.down + t.y
-    ground_offset = pose_a.translation.y() - ground_->height;
+    ground_offset = pose_a.translation.y() - ground_->height - margin;  // (the margin's plane)
   } else {
     pose_b = pose_at(b, s);
     const Vec3 centre_b = s >= 1.0 ? candidates_[b].x : states_[b].x + s * (candidates_[b].x - states_[b].x);
     centre_in_a = pose_a.apply_inverse(centre_b);
-    reach = defs_[b].bounding_radius * defs_[b].bounding_radius;
+    reach = (defs_[b].bounding_radius + margin) * (defs_[b].bounding_radius + margin);
     local_bounds = defs_[b].shape->bounds();
+    local_bounds.min().array() -= margin;
+    local_bounds.max().array() += margin;
   }
   // (whole blocks of samples first: most of a body's samples are far from the other)
   const std::vector<SampleBlock>& blocks = defs_[a].sample_blocks;
   const double slackened = b == kGround ? SampleBlock::slackened(ground_offset)
-                                        : SampleBlock::slackened(centre_in_a, defs_[b].bounding_radius);
+                                        : SampleBlock::slackened(centre_in_a, defs_[b].bounding_radius + margin);
   for (std::size_t block = 0; block < blocks.size(); ++block) {
     if (b == kGround ? !blocks[block].may_be_below(down_in_a, ground_offset, slackened)
                      : !blocks[block].may_reach(centre_in_a, slackened)) {
@@ -214,25 +227,26 @@ bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out
       double phi;
       Vec3 n;
       if (b == kGround) {
-        phi = m.dot(down_in_a) + ground_offset;
+        phi = m.dot(down_in_a) + ground_offset;  // (less the margin)
         if (phi >= 0.0) continue;
+        phi += margin;
         n = Vec3::UnitY();
       } else {
         if ((m - centre_in_a).squaredNorm() > reach) continue;
         const Vec3 p = pose_b.apply_inverse(pose_a.apply(m));
-        if (!local_bounds.contains(p)) continue;  // outside b's box is outside b
+        if (!local_bounds.contains(p)) continue;  // outside b's box (and margin) is outside b
         Vec3 n_local;
         phi = defs_[b].shape->phi_and_normal(p, n_local);
         // within kTouching of the surface is touching, not penetrating: a sample lying exactly
         // on another body's edge (an exactly aligned stack) would otherwise act, by round-off,
         // with the side face's normal and push the stack sideways
-        if (phi >= -kTouching) continue;
+        if (phi >= margin || std::abs(phi) <= kTouching) continue;
         n = pose_b.rotation * n_local;
       }
       out.push_back({a, b, candidate_poses_[a].apply(m), n, phi, m, s});
     }
   }
-  box_edge_crossing(a, b, s, out);
+  box_edge_crossing(a, b, s, margin, out);
   return out.size() > before;
 }
 
@@ -247,22 +261,58 @@ bool World::samples_inside(int a, int b, double s, std::vector<Penetration>& out
 // at 1-9 m/s. Only for edges at least 11.5 degrees apart (kCrossingSine): nearly parallel
 // edges are where boxes rest face on face, their axis is ill-conditioned, and the samples
 // hold them (measured: the aligned pile ended with 20 mm of overlap without this bound)
-bool World::box_edge_crossing(int a, int b, double s, std::vector<Penetration>& out) const {
+bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
   if (b == kGround) return false;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
   BoxContact contact;
   if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b) ||
-      !box_edge_contact(box_a, box_b, 0.0, contact) || contact.edge_sine < kCrossingSine) {
+      !box_edge_contact(box_a, box_b, margin, contact) || contact.edge_sine < kCrossingSine) {
     return false;
   }
-  if (contact.depth <= kTouching) return false;
+  if (contact.depth <= -margin || std::abs(contact.depth) <= kTouching) return false;
   const Vec3& on_a = contact.points[0].x;
   const Vec3 on_b = on_a + contact.depth * contact.normal;  // the edges' common perpendicular
   const Vec3 m = pose_a.apply_inverse(on_a);
   out.push_back({a, b, candidate_poses_[a].apply(m), contact.normal, -contact.depth, m, s, true,
                  pose_b.apply_inverse(on_b), pose_b.rotation.transpose() * contact.normal});
   return true;
+}
+
+// Two boxes (with box_contacts on): their exact contact (rigid/box_contact.h) instead of the
+// samples. The samples of a 0.5 m box are 0.125 m apart: an edge crossing another nearly
+// parallel edge between them (a box twisted a few degrees on the box below) sinks 12 mm in
+// unseen, and ~100 samples per direction cost more than the 15 axes and a clip. The points
+// lie on a's surface, each with its depth along the contact normal; like an edge crossing
+// (see box_edge_crossing) each is carried by both bodies, a's point in a's frame and the
+// matching point of b (depth along the normal) in b's, so that refresh_contact measures the
+// separation of the two along the normal carried by b. The pair is found once, in the
+// direction a < b. Returns 0 when the pair is not two boxes (or they overlap too deep, see
+// below), 1 when it was found here (points appended), 2 when it is left to the other direction
+int World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
+  if (!settings_.box_contacts || b == kGround) return 0;
+  const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
+  OrientedBox box_a, box_b;
+  if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b)) return 0;
+  // deeper than a quarter of the thinner box the axis of least overlap may be the far side's
+  // (a box driven past a wall's middle in one long step would be pushed on through): the
+  // samples then, both ways, with their own guard for deep points (see apply_contact_impulse)
+  const double trusted = kTrustedDepth * std::min(defs_[a].thickness, defs_[b].thickness);
+  if (a > b) return box_overlap_depth(box_a, box_b) > trusted ? 0 : 2;
+  BoxContact contact;
+  if (!box_box_contact(box_a, box_b, margin, contact)) return 1;
+  if (contact.depth > trusted) return 0;
+  const Vec3 normal_b = pose_b.rotation.transpose() * contact.normal;
+  for (int k = 0; k < contact.count; ++k) {
+    const double depth = contact.points[k].depth;
+    // (touching is not penetrating, as for the samples; within the margin outside: speculative)
+    if (!(depth > kTouching || (margin > 0.0 && depth > -margin))) continue;
+    const Vec3& on_a = contact.points[k].x;
+    const Vec3 m = pose_a.apply_inverse(on_a);
+    out.push_back({a, b, candidate_poses_[a].apply(m), contact.normal, -depth, m, s, true,
+                   pose_b.apply_inverse(on_a + depth * contact.normal), normal_b});
+  }
+  return 1;
 }
 
 // Body i's K at world point x, lever arm from its candidate centre of mass; zero for the
@@ -362,11 +412,13 @@ void deterministic_shuffle(std::vector<int>& order, std::uint64_t seed) {
 
 void World::resolve_collisions(double dt) {
   begin_impulse_stage(dt, /*with_forces=*/true, /*average_velocities=*/false);
-  // the first sweep runs the full narrow phase and remembers, per pair, every sample found
-  // inside the other body; later sweeps re-test only those (the candidates move little within
-  // a step, so a sample outside at the first sweep stays outside)
+  // the first sweep runs the full narrow phase and remembers, per pair, every point found
+  // inside the other body, and with speculative contacts those closer than the margin too
+  // (see contact_margin): a box falling on a box that an impulse has just stopped enters it
+  // within the sweeps; later sweeps re-test only those (a point farther out than the margin
+  // at the first sweep stays outside)
   std::vector<std::vector<Penetration>>& inside = pair_scratch_;
-  find_pair_penetrations(inside);
+  find_pair_penetrations(inside, settings_.speculative_contacts);
   // islands of the pairs with samples inside (the others have nothing to do), each swept on
   // its own and in parallel as in resolve_contacts: an island whose sweep applies no impulse
   // revisits no pair after it, so stopping it there gives the bits of the global sweeps
@@ -586,19 +638,52 @@ bool World::deeper(const Penetration& l, const Penetration& r) { return l.phi < 
 // Every pair's penetrating samples, both directions (pair order, then sample order). Pairs
 // are independent and read-only here, so they run in parallel; each writes only its own list,
 // so the result is the same for any number of threads.
-void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const {
+void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative) const {
   out.resize(pairs_.size());
   tbb::parallel_for(std::size_t(0), pairs_.size(), [&](std::size_t k) {
     out[k].clear();
-    find_penetrations(pairs_[k].a, pairs_[k].b, out[k]);
-    if (pairs_[k].b != kGround) find_penetrations(pairs_[k].b, pairs_[k].a, out[k]);
+    const double margin = speculative ? contact_margin(pairs_[k].a, pairs_[k].b) : 0.0;
+    find_penetrations(pairs_[k].a, pairs_[k].b, margin, out[k]);
+    if (pairs_[k].b != kGround) find_penetrations(pairs_[k].b, pairs_[k].a, margin, out[k]);
   });
+}
+
+// Speculative contacts. A point of the contact stage is found at the candidates, which move
+// as impulses land: a box resting on a falling box, both at the same velocity, touches
+// nothing at the candidates until the lower one is stopped, and then sinks g dt^2 into it
+// within the step unseen (the next step's collision stage catches it, one level of a stack
+// per step). So the stage also takes the points closer than a margin to the other body, with
+// the gap they have at the start of the step, gap = phi - dt v.n (phi at the candidate, v the
+// average velocity): such a point may close its gap within the step, v.n >= -gap / dt, and no
+// more (the constraint of speculative contacts in game engines, Catto 2013). The margin is
+// what the bodies' speeds and gravity may move them over the step relative to each other
+// (at most the broad phase's margins, which hold the pair's boxes): half a step at each body's
+// speed plus gravity over two steps, at least the penetration slop; never more than a quarter
+// of the thinner body (where level-set normals are trusted) nor outside what a grid's
+// exterior band holds
+double World::contact_margin(int a, int b) const {
+  // (not with cloths: a cloth between two bodies, or a body and the ground, is no part of
+  // their contact, and closing the gap it fills pushes edges through it; shipped cloth_demo,
+  // a box on a cloth over a sphere: body edges through the sheet at frames 26-33)
+  if (!settings_.speculative_contacts || !cloths_.empty()) return 0.0;
+  const double g = settings_.gravity.norm();
+  double margin = settings_.penetration_slop + 2.0 * g * dt_ * dt_;
+  double cap = std::numeric_limits<double>::infinity();
+  for (int i : {a, b}) {
+    if (i == kGround) continue;
+    margin += 0.5 * dt_ * states_[i].v.norm();
+    cap = std::min(cap, kTrustedDepth * defs_[i].thickness);
+  }
+  for (int i : {a, b}) {
+    if (i != kGround && defs_[i].shape) cap = std::min(cap, 0.5 * defs_[i].shape->exterior_reach());
+  }
+  return std::min(margin, cap);
 }
 
 void World::find_contacts() {
   // per pair: each direction deepest first and reduced, then the pair's points deepest first
   std::vector<std::vector<Penetration>>& found = pair_scratch_;
-  find_pair_penetrations(found);
+  find_pair_penetrations(found, settings_.speculative_contacts);
   tbb::parallel_for(std::size_t(0), found.size(), [&](std::size_t k) {
     std::vector<Penetration>& points = found[k];
     const auto split = std::stable_partition(points.begin(), points.end(),
@@ -617,6 +702,7 @@ void World::find_contacts() {
     for (const Penetration& p : found[k]) {
       contacts_.push_back({p, pairs_[k].friction, Vec3::Zero(), body_impulse_matrix(p.a, p.x),
                            body_impulse_matrix(p.b, p.x)});
+      contacts_.back().apart = p.phi > 0.0;
     }
   }
 }
@@ -665,8 +751,16 @@ bool World::apply_contact_impulse(ContactPoint& contact, ImpulseLog& log) {
   // overlaps), so such a point is held inelastically and not pushed
   const bool trusted = p.b == kGround || -p.phi <= kTrustedDepth * std::min(defs_[p.a].thickness, defs_[p.b].thickness);
   const double excess = trusted ? -p.phi - settings_.penetration_slop : 0.0;
-  const double target = excess > 0.0 ? std::min(settings_.penetration_recovery * excess / dt_,
-                                                settings_.max_recovery_speed) : 0.0;
+  double target = excess > 0.0 ? std::min(settings_.penetration_recovery * excess / dt_,
+                                          settings_.max_recovery_speed) : 0.0;
+  // a speculative contact (see contact_margin): apart at the start of the step, the point may
+  // close its gap and no more. (A point already inside when the stage began keeps the rule
+  // above, which stops its approach even when its gap is not yet closed: between the samples
+  // of a box, edges cross, and that extra hold keeps them apart)
+  if (contact.apart) {
+    const double gap = p.phi - dt_ * v.dot(p.n);
+    if (gap > 0.0) target = -gap / dt_;
+  }
   const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction, target);
   const Vec3 change = total - contact.total;
   if ((K * change).norm() <= settings_.contact_tolerance) {
@@ -702,7 +796,7 @@ void World::assign_contact_levels() {
   auto fixed = [&](int i) { return i == kGround || defs_[i].kinematic; };
   for (const ContactPoint& c : contacts_) {
     const int a = c.point.a, b = c.point.b;
-    if (fixed(a) || fixed(b)) continue;
+    if (c.apart || fixed(a) || fixed(b)) continue;
     ++start[a + 1];
     ++start[b + 1];
   }
@@ -711,6 +805,7 @@ void World::assign_contact_levels() {
   std::vector<int>& filled = body_scratch_;
   filled.assign(start.begin(), start.end() - 1);
   for (const ContactPoint& c : contacts_) {
+    if (c.apart) continue;
     const int a = c.point.a, b = c.point.b;
     const bool a_fixed = fixed(a), b_fixed = fixed(b);
     if (b_fixed && !a_fixed && level_[a] < 0) { level_[a] = 0; queue.push_back(a); }
@@ -820,7 +915,7 @@ void World::propagate_shocks() {
   reset_sets(group, n);
   auto root = [&](int i) { return set_root(group, i); };
   for (const ContactPoint& c : contacts_) {
-    if (c.point.b != kGround) group[root(c.point.a)] = root(c.point.b);
+    if (!c.apart && c.point.b != kGround) group[root(c.point.a)] = root(c.point.b);
   }
   std::vector<char>& thrown = shock_.thrown;
   thrown.assign(n, 0);

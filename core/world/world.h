@@ -50,7 +50,20 @@ struct WorldSettings {
   double max_recovery_speed = 0.5;       // (m/s) ... but never faster than this
   double contact_tolerance = 1e-6;       // (m/s) contact sweeps stop once no impulse
                                          // changes a point velocity by more than this
-  double max_substep = 1.0 / 240.0;      // (s) longest automatic substep
+  bool speculative_contacts = true;      // the contact stage also takes points not yet inside,
+                                         // closer than a margin (see contact_margin), and lets
+                                         // each close its gap within the step but no more
+                                         // (worlds without cloths only)
+  bool box_contacts = true;              // two boxes meet by their exact contact (separating
+                                         // axes and clipping, rigid/box_contact.h), not by
+                                         // samples against the level set
+  double max_substep = 1.0 / 120.0;      // (s) longest automatic substep (1/240 before
+                                         // speculative and exact box contacts)
+  double cloth_contact_substep = 1.0 / 240.0;  // (s) longest substep while a dynamic body may
+                                         // touch a cloth (see frame_schedule)
+  double bounce_substep = 1.0 / 240.0;   // (s) longest substep while a body may bounce: an awake
+                                         // dynamic body and any restitution above 0 (see
+                                         // frame_schedule)
   double cloth_max_substep = 1.0 / 120.0; // (s) longest automatic cloth step: cloths step at
                                          // their own, coarser rate (every few substeps)
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
@@ -191,6 +204,9 @@ class World {
     Mat3 k_b = Mat3::Zero();        // lever arms when found (they move < 1 mm in a step)
     std::uint64_t seen_a = ~0ull;   // versions of a and b when last evaluated: while both
     std::uint64_t seen_b = ~0ull;   // stay the same, evaluating again would change nothing
+    bool apart = false;             // a speculative contact: outside when the stage began; it
+                                    // neither levels the bodies for shock propagation nor
+                                    // joins them for sleeping
   };
   struct BodyPair {
     int a, b;  // b may be kGround
@@ -285,17 +301,19 @@ class World {
   void mark_stale(int i, ImpulseLog& log);
   void refresh_stale_candidates(ImpulseLog& log);
   Vec3 point_velocity(int i, const Vec3& x) const;
-  void find_penetrations(int a, int b, std::vector<Penetration>& out) const;
+  void find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const;
+  double contact_margin(int a, int b) const;
   long long sweep_tests(int a, int b) const;
   Pose pose_at(int i, double s) const;
-  bool samples_inside(int a, int b, double s, std::vector<Penetration>& out) const;
-  bool box_edge_crossing(int a, int b, double s, std::vector<Penetration>& out) const;
+  bool samples_inside(int a, int b, double s, double margin, bool exact_boxes, std::vector<Penetration>& out) const;
+  bool box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  int box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log);
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
-  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out) const;
+  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative) const;
   void find_contacts();
   static void reduce_to_four(std::vector<Penetration>& points);
   static void reduce_contact_points(std::vector<Penetration>& points);

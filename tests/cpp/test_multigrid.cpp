@@ -340,3 +340,12 @@ TEST(ClothMultigrid, SteppedClothMatchesBlockJacobi) {
   std::printf("  largest difference of the end positions %.2e m\n", difference);
   EXPECT_LT(difference, 1e-6);
 }
+
+// The automatic choice: multigrid from 1,000 free vertices, pinned or not, block-Jacobi below.
+TEST(ClothMultigrid, AutomaticChoice) {
+  ClothDesc big = test::grid_cloth(33, 33, 1.0, 1.0);
+  EXPECT_TRUE(Cloth(big).uses_multigrid());
+  big.pinned = {0};
+  EXPECT_TRUE(Cloth(big).uses_multigrid());
+  EXPECT_FALSE(Cloth(test::grid_cloth(17, 17, 1.0, 1.0)).uses_multigrid());
+}

@@ -166,7 +166,7 @@ TEST(World, AutomaticSubstepsFollowSpeed) {
   const int resting = world.automatic_substeps(1.0 / 24.0);
   world.body_state(0).v = Vec3(100.0, 0.0, 0.0);
   const int fast = world.automatic_substeps(1.0 / 24.0);
-  EXPECT_EQ(resting, 10);  // the 1/240 s ceiling
+  EXPECT_EQ(resting, 5);  // the 1/120 s ceiling
   // 100 m/s over 1/24 s is 4.17 m; 0.2 of the 0.2 m thickness per substep -> 105 substeps
   EXPECT_GE(fast, 104);
   EXPECT_LE(fast, 106);
