@@ -35,8 +35,10 @@ from simbake import _core  # noqa: E402
 
 
 def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: str,
-          preconditioner: str = "automatic", self_collision: bool = True) -> "_core.World":
-    world = _core.World(gravity=np.array([0.0, -spec.GRAVITY, 0.0]), threads=1, cloth_max_substep=cloth_step)
+          preconditioner: str = "automatic", self_collision: bool = True,
+          contacts_in_solve: bool = True) -> "_core.World":
+    world = _core.World(gravity=np.array([0.0, -spec.GRAVITY, 0.0]), threads=1, cloth_max_substep=cloth_step,
+                        cloth_contacts_in_solve=contacts_in_solve)
     world.set_ground(spec.GROUND, 0.5, 0.0)
     radius = spec.SPHERE_RADIUS
     samples = _core.sphere_mesh(radius, 4)[0]
@@ -61,10 +63,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=spec.SECONDS)
     parser.add_argument("--preconditioner", choices=("automatic", "block_jacobi", "multigrid"), default="automatic")
     parser.add_argument("--self-collision", choices=("on", "off"), default="on")
+    parser.add_argument("--contacts-in-solve", choices=("on", "off"), default="on")
     args = parser.parse_args()
     spec.SECONDS = args.seconds
     world = build(args.n, args.cloth_step, args.tolerance, args.integrator, args.model, args.preconditioner,
-                  args.self_collision == "on")
+                  args.self_collision == "on", args.contacts_in_solve == "on")
     meter = spec.Meter(args.n)
     meter.frame(0.0, world.cloth_state(0)[0])
     frames = int(round(args.seconds * spec.FPS))
@@ -82,6 +85,8 @@ def main() -> None:
         settings["preconditioner"] = args.preconditioner
     if args.self_collision == "off":
         settings["self_collision"] = False
+    if args.contacts_in_solve == "off":
+        settings["contacts_in_solve"] = False
     spec.report("simbake", args.n, settings, wall, meter, cpu_seconds=cpu,
                 cloth_steps=stats["cloth_steps"], substeps=stats["substeps"],
                 solver_iterations=stats["cloth_solver_iterations"], solver_cpu_seconds=stats["cloth_solver_seconds"],

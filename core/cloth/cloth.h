@@ -5,7 +5,8 @@
 //
 // Stages the world calls, in order, each substep (DESIGN.md, "The world step", stage 6):
 //   update_velocities(dt, gravity)   forces (stretch/shear or membrane, bending, damping) and
-//                                    the velocity update: explicit or implicit (backward Euler)
+//                                    the velocity update: explicit or implicit (backward Euler),
+//                                    with the contacts the world passes held inside it
 //   ... the world's collision impulses change v ...
 //   limit_strain(dt)                 impulses along over-stretched (and, per the compression
 //                                    mode, over-compressed) edges so that x + dt v respects them
@@ -57,12 +58,26 @@ struct ClothDesc {
   ClothPreconditioner preconditioner = ClothPreconditioner::kAutomatic;  // implicit: of its conjugate gradients
 };
 
+// A contact held inside the velocity update (Baraff and Witkin 1998, "Large steps in cloth
+// simulation", section 5.3: constraint filtering): after the update, the vertex's velocity
+// along the unit `normal` is `speed` (the surface's own speed along it), and the rest of the
+// cloth answers to that within the same implicit solve, instead of being stopped vertex by
+// vertex after it. The update sets `impulse`: what the surface gave the vertex along the
+// normal (N s); negative means it had to pull, and the caller should let the vertex go.
+struct ClothContactConstraint {
+  int vertex = -1;
+  Vec3 normal = Vec3::UnitY();
+  double speed = 0.0;    // (m/s)
+  double impulse = 0.0;  // (N s) set by update_velocities
+};
+
 class Cloth {
  public:
   explicit Cloth(const ClothDesc& desc);  // validates and builds edges, hinges, masses
 
   // stages (see the top of this file)
-  void update_velocities(double dt, const Vec3& gravity);
+  // constraints: at most one per free vertex (pinned ones are skipped), or null
+  void update_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints = nullptr);
   void limit_strain(double dt, bool global = true);
   // the same with the vertices marked in `held` (n) held still as if pinned, for this call
   void limit_strain_holding(double dt, const std::vector<char>& held);
@@ -121,8 +136,8 @@ class Cloth {
   double max_correction_ = 0.0;  // the strain limiter's largest length correction per step (m)
   std::vector<int> forward_order_, backward_order_;  // the strain limiter's sweep orders
 
-  void explicit_velocities(double dt, const Vec3& gravity);
-  void implicit_velocities(double dt, const Vec3& gravity);
+  void explicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
+  void implicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
   double compute_stable_step() const;
   double largest_omega2(bool stretch, bool bend) const;
   double strain_sweep(double dt, const std::vector<int>& order);

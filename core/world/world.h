@@ -64,6 +64,9 @@ struct WorldSettings {
   double bounce_substep = 1.0 / 240.0;   // (s) longest substep while a body may bounce: an awake
                                          // dynamic body and any restitution above 0 (see
                                          // frame_schedule)
+  bool cloth_contacts_in_solve = true;   // cloth vertices resting on a surface are held there
+                                         // inside the implicit solve (cloth_stages.cpp,
+                                         // contact_constraints), not only stopped after it
   double cloth_max_substep = 1.0 / 120.0; // (s) longest automatic cloth step: cloths step at
                                          // their own, coarser rate (every few substeps)
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
@@ -289,6 +292,9 @@ class World {
   void overlapping_pairs(std::vector<std::pair<int, int>>& out);
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
+  Vec3 surface_velocity(int b, const Vec3& p) const;
+  void contact_constraints(int c, std::vector<ClothContactConstraint>& out);
+  void apply_constraint_impulses(int c, const std::vector<ClothContactConstraint>& constraints);
   // a box's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
   template <class Contact>
   bool collide_features(int c, int b, double dt, bool& grid_built, const Contact& contact);
@@ -356,6 +362,14 @@ class World {
   std::vector<std::vector<std::array<int, 2>>> cloth_edges_;  // (ncloth) (nedge) vertex pairs, i < j
   std::vector<double> cloth_mean_edge_;                   // (ncloth) mean rest edge length (m)
   std::vector<TriangleGrid> cloth_grid_;                  // (ncloth) scratch: its triangles at the candidate positions
+  // a cloth's contacts with bodies, from one step to the next (contact_constraints)
+  struct ClothTouches {
+    std::vector<Vec3> normal;  // (nvert) the sum of the normals of the contacts that pushed it this step, by weight
+    std::vector<int> body;     // (nvert) the body of the last of them (-1: the ground)
+    std::vector<char> released;  // (nvert) its constraint pulled last step: not held this step
+    std::vector<int> constrained_body;  // (constraints) scratch: each constraint's body
+  };
+  std::vector<ClothTouches> cloth_touches_;               // (ncloth)
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages
