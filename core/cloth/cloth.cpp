@@ -193,12 +193,17 @@ double thread_cpu_seconds() {
 struct Filter {
   int block;
   Vec3 normal;
+  bool full;  // every direction fixed (S = 0 there)
 };
 
 void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
   for (const Filter& f : filter) {
     auto block = x.segment<3>(3 * f.block);
-    block -= f.normal * f.normal.dot(block);
+    if (f.full) {
+      block.setZero();
+    } else {
+      block -= f.normal * f.normal.dot(block);
+    }
   }
 }
 
@@ -209,7 +214,8 @@ void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
 // product with the step's dot product, the update with the residual's norm); everything
 // runs in a fixed order, so the result has the same bits on any thread.
 // With constrained blocks (Baraff and Witkin's modified PCG), z starts from its fixed
-// components (z's own values there along each normal; the rest is ignored) and every search
+// components (z's own values there along each normal, or all three where fixed in full; the
+// rest is ignored) and every search
 // direction and residual is filtered, so those components stay as they are and the rest
 // solves the system in the remaining directions; the preconditioner becomes S P^-1 S, still
 // symmetric.
@@ -227,7 +233,9 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
     z.setZero(size);
   } else {
     Eigen::VectorXd fixed = Eigen::VectorXd::Zero(size);
-    for (const Filter& f : filter) fixed.segment<3>(3 * f.block) = f.normal * f.normal.dot(z.segment<3>(3 * f.block));
+    for (const Filter& f : filter) {
+      fixed.segment<3>(3 * f.block) = f.full ? Vec3(z.segment<3>(3 * f.block)) : Vec3(f.normal * f.normal.dot(z.segment<3>(3 * f.block)));
+    }
     z = fixed;
     for (int i = 0; i < a.size; ++i) r.segment<3>(3 * i) -= multiply(z, i);
     apply_filter(filter, r);
@@ -265,6 +273,14 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
     for (Eigen::Index k = 0; k < size; ++k) direction[k] = s[k] + beta * direction[k];
   }
   return kMaxSolverIterations;
+}
+
+// The velocity a constraint leaves its vertex with, from `v`: the normal component set, and
+// with stick the rest too
+Vec3 constrained_velocity(const ClothContactConstraint& c, const Vec3& v) {
+  const Vec3 across = c.stick ? Vec3(c.surface_velocity - c.normal * c.normal.dot(c.surface_velocity))
+                              : Vec3(v - c.normal * c.normal.dot(v));
+  return across + c.speed * c.normal;
 }
 
 // (A z - b) at block i: the force the constraints add there (zero off the constrained
@@ -421,9 +437,11 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   if (!constraints) return;
   for (ClothContactConstraint& c : *constraints) {
     if (pinned_[c.vertex]) continue;
-    const double change = c.speed - row(v_, c.vertex).dot(c.normal);
-    v_.row(c.vertex) += (change * c.normal).transpose();
-    c.impulse = mass_[c.vertex] * change;
+    const Vec3 before = row(v_, c.vertex), after = constrained_velocity(c, before);
+    v_.row(c.vertex) = after.transpose();
+    const Vec3 impulse = mass_[c.vertex] * (after - before);
+    c.impulse = impulse.dot(c.normal);
+    c.friction = impulse - c.impulse * c.normal;
   }
 }
 
@@ -485,10 +503,9 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
     for (const ClothContactConstraint& c : *constraints) {
       const int i = free_index_[c.vertex];
       if (i < 0) continue;
-      const Vec3 normal = c.normal.normalized();
-      require(normal.allFinite(), "constraint: normal must be a nonzero direction");
-      filter.push_back({i, normal});
-      z.segment<3>(3 * i) = normal * ((c.speed - row(v_, c.vertex).dot(normal)) / scale[3 * i]);
+      require(std::abs(c.normal.norm() - 1.0) < 1e-9, "constraint: normal must be a unit vector");
+      filter.push_back({i, c.normal, c.stick});
+      z.segment<3>(3 * i) = (constrained_velocity(c, row(v_, c.vertex)) - row(v_, c.vertex)) / scale[3 * i];
     }
     std::sort(filter.begin(), filter.end(), [](const Filter& a, const Filter& b) { return a.block < b.block; });
     for (size_t f = 1; f < filter.size(); ++f) require(filter[f].block != filter[f - 1].block, "constraint: one per vertex");
@@ -497,8 +514,9 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
       for (int r = 0; r < 3; ++r) diagonal += system.coeff(3 * f.block + r, 3 * f.block + r) / 3.0;
       const double alpha = kConstraintStiffness * diagonal;
       stiffness.push_back(alpha);
+      const Mat3 held = f.full ? Mat3(Mat3::Identity()) : Mat3(f.normal * f.normal.transpose());
       for (int r = 0; r < 3; ++r)
-        for (int q = 0; q < 3; ++q) system.coeffRef(3 * f.block + r, 3 * f.block + q) += alpha * f.normal[r] * f.normal[q];
+        for (int q = 0; q < 3; ++q) system.coeffRef(3 * f.block + r, 3 * f.block + q) += alpha * held(r, q);
     }
   }
   preconditioner_->update(system);
@@ -507,16 +525,18 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   if (constraints) {
     // the surfaces' impulses: (A dv - b) along each normal, unscaled (A dv - b = M^1/2 (A_s z - b_s)),
     // A without the stiffness added for the preconditioner
-    std::vector<double> impulse(free_count_, 0.0);
+    std::vector<Vec3> impulse(free_count_, Vec3::Zero());
     for (size_t f = 0; f < filter.size(); ++f) {
       const int i = filter[f].block;
-      const Vec3& normal = filter[f].normal;
-      impulse[i] = (constraint_residual(preconditioner_->matrix(), rhs, z, i).dot(normal) -
-                    stiffness[f] * normal.dot(z.segment<3>(3 * i))) / scale[3 * i];
+      const Mat3 held = filter[f].full ? Mat3(Mat3::Identity()) : Mat3(filter[f].normal * filter[f].normal.transpose());
+      impulse[i] = (held * constraint_residual(preconditioner_->matrix(), rhs, z, i) -
+                    stiffness[f] * held * z.segment<3>(3 * i)) / scale[3 * i];
     }
     for (ClothContactConstraint& c : *constraints) {
       const int i = free_index_[c.vertex];
-      if (i >= 0) c.impulse = impulse[i];
+      if (i < 0) continue;
+      c.impulse = impulse[i].dot(c.normal);
+      c.friction = impulse[i] - c.impulse * c.normal;
     }
   }
   Eigen::VectorXd dv = scale.asDiagonal() * z;

@@ -60,15 +60,21 @@ struct ClothDesc {
 
 // A contact held inside the velocity update (Baraff and Witkin 1998, "Large steps in cloth
 // simulation", section 5.3: constraint filtering): after the update, the vertex's velocity
-// along the unit `normal` is `speed` (the surface's own speed along it), and the rest of the
-// cloth answers to that within the same implicit solve, instead of being stopped vertex by
-// vertex after it. The update sets `impulse`: what the surface gave the vertex along the
-// normal (N s); negative means it had to pull, and the caller should let the vertex go.
+// along the unit `normal` is `speed` (the surface's own speed along it, or what lands the
+// vertex on it), and, when `stick` (static friction), its velocity across the normal is the
+// surface's (`surface_velocity`'s); the rest of the cloth answers to that within the same
+// implicit solve, instead of being stopped vertex by vertex after it. The update sets
+// `impulse`: what the surface gave the vertex along the normal (N s; negative means it had to
+// pull, and the caller should let the vertex go), and `friction`: across it (N s; zero unless
+// `stick`: the caller checks it against the friction cone).
 struct ClothContactConstraint {
   int vertex = -1;
   Vec3 normal = Vec3::UnitY();
-  double speed = 0.0;    // (m/s)
-  double impulse = 0.0;  // (N s) set by update_velocities
+  double speed = 0.0;                     // (m/s)
+  bool stick = false;
+  Vec3 surface_velocity = Vec3::Zero();   // (m/s) used when stick
+  double impulse = 0.0;                   // (N s) set by update_velocities
+  Vec3 friction = Vec3::Zero();           // (N s) set by update_velocities
 };
 
 class Cloth {

@@ -293,7 +293,7 @@ class World {
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
   Vec3 surface_velocity(int b, const Vec3& p) const;
-  void contact_constraints(int c, std::vector<ClothContactConstraint>& out);
+  void contact_constraints(int c, double dt, std::vector<ClothContactConstraint>& out);
   void apply_constraint_impulses(int c, const std::vector<ClothContactConstraint>& constraints);
   // a box's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
   template <class Contact>
@@ -367,6 +367,7 @@ class World {
     std::vector<Vec3> normal;  // (nvert) the sum of the normals of the contacts that pushed it this step, by weight
     std::vector<int> body;     // (nvert) the body of the last of them (-1: the ground)
     std::vector<char> released;  // (nvert) its constraint pulled last step: not held this step
+    std::vector<char> stuck;     // (nvert) friction stopped its slip: held in every direction
     std::vector<int> constrained_body;  // (constraints) scratch: each constraint's body
   };
   std::vector<ClothTouches> cloth_touches_;               // (ncloth)

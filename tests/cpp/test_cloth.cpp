@@ -757,7 +757,11 @@ TEST(ClothContactConstraints, HoldTheirVerticesAndBalanceMomentum) {
       std::normal_distribution<double> normal(0.0, 1.0);
       for (int k : {3, 17, 40, 41, 77, 100, 143}) {
         const Vec3 n = Vec3(normal(random), normal(random), normal(random)).normalized();
-        constraints.push_back({k, n, 0.2 * normal(random), 0.0});
+        ClothContactConstraint c;
+        c.vertex = k;
+        c.normal = n;
+        c.speed = 0.2 * normal(random);
+        constraints.push_back(c);
       }
       cloth.update_velocities(dt, gravity, &constraints);
       const Points& v = cloth.velocities();
@@ -785,7 +789,8 @@ TEST(ClothContactConstraints, ReportWhetherTheSurfacePushesOrPulls) {
   for (double g : {-9.81, 9.81}) {
     ClothDesc d = grid(9, 9, 0.4, 0.4);
     Cloth cloth(d);
-    std::vector<ClothContactConstraint> constraints = {{40, Vec3::UnitY(), 0.0, 0.0}};
+    std::vector<ClothContactConstraint> constraints(1);
+    constraints[0].vertex = 40;
     cloth.update_velocities(1.0 / 120.0, Vec3(0.0, g, 0.0), &constraints);
     if (g < 0.0) {
       EXPECT_GT(constraints[0].impulse, 0.0);
