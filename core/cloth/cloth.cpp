@@ -194,6 +194,7 @@ struct Filter {
   int block;
   Vec3 normal;
   bool full;  // every direction fixed (S = 0 there)
+  Mat3 held() const { return full ? Mat3(Mat3::Identity()) : Mat3(normal * normal.transpose()); }  // I - S
 };
 
 void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
@@ -489,8 +490,8 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   // last step's: a spinning, strongly damped cloth gained 3% kinetic energy at 1e-3.)
   if (preconditioner_.use_count() > 1) preconditioner_ = preconditioner_->clone();
   const double solve_start = thread_cpu_seconds();
-  // the constrained blocks, each fixed at z = M^1/2 dv along its normal. The preconditioner
-  // is built with each made stiff along its normal (alpha n n^T added, alpha kConstraintStiffness
+  // the constrained blocks, each fixed at z = M^1/2 dv along its normal (or in full). The
+  // preconditioner is built with each made stiff there (alpha n n^T, or alpha I, added, alpha kConstraintStiffness
   // x the block's mean diagonal): that changes nothing in the directions the filtered
   // conjugate gradients search (S (A + alpha n n^T) S = S A S), but multigrid's coarse levels
   // then know those directions are held. Filtering a preconditioner built without them
@@ -514,7 +515,7 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
       for (int r = 0; r < 3; ++r) diagonal += system.coeff(3 * f.block + r, 3 * f.block + r) / 3.0;
       const double alpha = kConstraintStiffness * diagonal;
       stiffness.push_back(alpha);
-      const Mat3 held = f.full ? Mat3(Mat3::Identity()) : Mat3(f.normal * f.normal.transpose());
+      const Mat3 held = f.held();
       for (int r = 0; r < 3; ++r)
         for (int q = 0; q < 3; ++q) system.coeffRef(3 * f.block + r, 3 * f.block + q) += alpha * held(r, q);
     }
@@ -523,12 +524,12 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   solver_iterations_ += conjugate_gradients(*preconditioner_, rhs, tolerance_, z, filter);
   solver_seconds_ += thread_cpu_seconds() - solve_start;
   if (constraints) {
-    // the surfaces' impulses: (A dv - b) along each normal, unscaled (A dv - b = M^1/2 (A_s z - b_s)),
-    // A without the stiffness added for the preconditioner
+    // the surfaces' impulses: (A dv - b) in the held directions, unscaled (A dv - b =
+    // M^1/2 (A_s z - b_s)), A without the stiffness added for the preconditioner
     std::vector<Vec3> impulse(free_count_, Vec3::Zero());
     for (size_t f = 0; f < filter.size(); ++f) {
       const int i = filter[f].block;
-      const Mat3 held = filter[f].full ? Mat3(Mat3::Identity()) : Mat3(filter[f].normal * filter[f].normal.transpose());
+      const Mat3 held = filter[f].held();
       impulse[i] = (held * constraint_residual(preconditioner_->matrix(), rhs, z, i) -
                     stiffness[f] * held * z.segment<3>(3 * i)) / scale[3 * i];
     }

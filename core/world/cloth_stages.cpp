@@ -251,7 +251,7 @@ void World::contact_constraints(int c, double dt, std::vector<ClothContactConstr
   for (int k = 0; k < n; ++k) reach.extend(candidate(k));
   for (int b = 0; b < body_count() && h > 0.0; ++b) {
     const RigidBodyDef& def = defs_[b];
-    if (!def.shape || !def.kinematic) continue;
+    if (!def.shape || !def.kinematic || moving_kinematic(b)) continue;
     const Vec3 nearest = states_[b].x.cwiseMax(reach.min()).cwiseMin(reach.max());
     if ((nearest - states_[b].x).norm() > def.bounding_radius + h) continue;
     const Pose pose = mesh_pose(def, states_[b]);
@@ -296,7 +296,7 @@ void World::contact_constraints(int c, double dt, std::vector<ClothContactConstr
     held.vertex = k;
     held.normal = normal;
     held.speed = speed;
-    held.stick = touches.stuck[k] && !predicted[k];
+    held.stick = touches.stuck[k] && !predicted[k] && (body < 0 || !moving_kinematic(body));
     held.surface_velocity = surface;
     out.push_back(held);
     touches.constrained_body.push_back(body);
