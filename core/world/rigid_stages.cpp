@@ -82,7 +82,13 @@ void World::update_candidate(int i) {
     c.x = s.x + dt_ * v;
     c.v = v;
     c.q = free_rotation(def, s.q, s.l, dt_);
-    if (average_velocities_) omega_[i] = rotation_vector_from_quat(c.q * s.q.conjugate()) / dt_;
+    if (average_velocities_) {
+      // (an isotropic body turns at L / I exactly, the rotation vector's shorter way round
+      // while it turns less than half a turn in the step)
+      const Vec3 spin = def.inverse_inertia[0] * s.l;
+      omega_[i] = def.isotropic && dt_ * spin.norm() < 3.0 ? spin
+                                                           : Vec3(rotation_vector_from_quat(c.q * s.q.conjugate()) / dt_);
+    }
   }
   candidate_poses_[i] = mesh_pose(def, c);
   stale_[i] = 0;
