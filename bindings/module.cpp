@@ -185,7 +185,7 @@ PYBIND11_MODULE(_core, m) {
   py::class_<World>(m, "World")
       .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
                        double travel_fraction, int max_substeps, int threads, double cloth_max_substep,
-                       bool speculative_contacts, double contact_tolerance, bool box_contacts) {
+                       bool speculative_contacts, double contact_tolerance, bool box_contacts, int shock_sweeps) {
              WorldSettings s;
              s.gravity = gravity;
              s.collision_sweeps = collision_sweeps;
@@ -197,6 +197,8 @@ PYBIND11_MODULE(_core, m) {
              s.cloth_max_substep = positive(cloth_max_substep, "cloth_max_substep");
              s.speculative_contacts = speculative_contacts;
              s.box_contacts = box_contacts;
+             if (shock_sweeps < 0) throw std::invalid_argument("shock_sweeps must be >= 0");
+             s.shock_sweeps = shock_sweeps;
              s.contact_tolerance = positive(contact_tolerance, "contact_tolerance");
              positive(max_substep, "max_substep");
              positive(travel_fraction, "travel_fraction");
@@ -212,7 +214,8 @@ PYBIND11_MODULE(_core, m) {
            py::arg("cloth_max_substep") = WorldSettings().cloth_max_substep,
            py::arg("speculative_contacts") = WorldSettings().speculative_contacts,
            py::arg("contact_tolerance") = WorldSettings().contact_tolerance,
-           py::arg("box_contacts") = WorldSettings().box_contacts)
+           py::arg("box_contacts") = WorldSettings().box_contacts,
+           py::arg("shock_sweeps") = WorldSettings().shock_sweeps)
       .def("set_ground", [](World& w, double height, double friction, double restitution) {
              w.set_ground(GroundDef{height, friction, restitution});
            }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)

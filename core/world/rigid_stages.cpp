@@ -769,7 +769,7 @@ bool World::apply_contact_impulse(ContactPoint& contact, ImpulseLog& log) {
   }
   const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction, target);
   const Vec3 change = total - contact.total;
-  if ((K * change).norm() <= settings_.contact_tolerance) {
+  if ((K * change).squaredNorm() <= settings_.contact_tolerance * settings_.contact_tolerance) {
     contact.seen_a = va;
     contact.seen_b = vb;
     return false;

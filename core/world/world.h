@@ -41,7 +41,7 @@ struct WorldSettings {
   Vec3 gravity = Vec3(0.0, -9.81, 0.0);  // (m/s^2)
   int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
   int contact_sweeps = 10;               // inelastic sweeps over all pairs (at most)
-  int shock_sweeps = 20;                 // sweeps per level of shock propagation (at most)
+  int shock_sweeps = 10;                 // sweeps per level of shock propagation (at most)
   double sleep_speed = 0.01;             // (m/s) a body whose points stray less than
   double sleep_time = 0.5;               // (s) sleep_speed * sleep_time / 2 for sleep_time
                                          // may sleep; sleep_time 0 disables sleeping
