@@ -23,7 +23,8 @@ std::vector<SampleBlock> sample_blocks(const Points& samples) {
 Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state) {
   // a mesh point m sits at x + R(q) P^T (m - c): rotation R(q) P^T, translation x - R c
   Pose pose;
-  pose.rotation = state.q.toRotationMatrix() * def.mesh_axes.transpose();
+  // (an isotropic body's principal axes are its mesh axes: see RigidBodyDef::isotropic)
+  pose.rotation = def.isotropic ? state.q.toRotationMatrix() : Mat3(state.q.toRotationMatrix() * def.mesh_axes.transpose());
   pose.translation = state.x - pose.rotation * def.center;
   return pose;
 }

@@ -53,9 +53,11 @@ struct RigidBodyDef {
   double restitution = 0.0;                  // in [0, 1]
   bool kinematic = false;                    // infinite mass, moved only by its own motion
   bool isotropic = false;                    // equal principal moments (a cube, a sphere): the
-                                             // torque-free rotation is exact, about L at |L| / I
+                                             // torque-free rotation is exact, about L at |L| / I;
+                                             // its mesh axes are its principal axes
   SignedDistancePtr shape;                   // signed distance in mesh coordinates; null when
                                              // nothing can touch the body (no grid baked)
+  const BoxDistance* box = nullptr;          // the shape when it is a box (exact box contacts)
   Points samples;                            // (s x 3) surface samples in mesh coordinates (m)
   std::vector<SampleBlock> sample_blocks;    // (ceil(s / 8)) their bounding spheres, in order
   double bounding_radius = 0.0;              // largest |sample - center| (m)

@@ -138,12 +138,21 @@ long long World::sweep_tests(int a, int b) const {
   // the contact stage works at the candidates: the collision stage has turned back whatever
   // approached fast, and a body sliding fast over another keeps its contacts where it ends
   if (average_velocities_) return 1;
+  const Vec3 relative = (candidates_[a].x - states_[a].x) - (candidates_[b].x - states_[b].x);
+  const double spacing = 2.0 * settings_.travel_fraction * std::min(defs_[a].thickness, defs_[b].thickness);
+  // the turn's angle 2 atan2(|u|, |w|) of the relative rotation u + w is at most 2 |u| / |w|:
+  // a pair that travels less than the spacing even by that bound takes one test, as it would
+  // by the exact angle (most pairs; the arc tangent is left to the others)
+  auto turn_bound = [&](int i) {
+    const Quat d = candidates_[i].q * states_[i].q.conjugate();
+    const double w = std::abs(d.w());
+    return w > 0.5 ? 2.0 * d.vec().norm() / w * defs_[i].bounding_radius : std::numeric_limits<double>::infinity();
+  };
+  if (relative.norm() + turn_bound(a) + turn_bound(b) <= spacing) return 1;
   auto turn = [&](int i) {
     return candidates_[i].q.angularDistance(states_[i].q) * defs_[i].bounding_radius;
   };
-  const Vec3 relative = (candidates_[a].x - states_[a].x) - (candidates_[b].x - states_[b].x);
   const double travel = relative.norm() + turn(a) + turn(b);
-  const double spacing = 2.0 * settings_.travel_fraction * std::min(defs_[a].thickness, defs_[b].thickness);
   const double tests = std::ceil(travel / spacing);
   // (a cap far beyond any speed a scene can mean, so that the count stays an integer)
   return std::isfinite(tests) ? static_cast<long long>(std::clamp(tests, 1.0, 1e15)) : 1;
@@ -268,11 +277,11 @@ bool World::samples_inside(int a, int b, double s, double margin, bool exact_box
 // edges are where boxes rest face on face, their axis is ill-conditioned, and the samples
 // hold them (measured: the aligned pile ended with 20 mm of overlap without this bound)
 bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
-  if (b == kGround) return false;
+  if (b == kGround || !defs_[a].box || !defs_[b].box) return false;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
   BoxContact contact;
-  if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b) ||
+  if (!body_box(a, pose_a, box_a) || !body_box(b, pose_b, box_b) ||
       !box_edge_contact(box_a, box_b, margin, contact) || contact.edge_sine < kCrossingSine) {
     return false;
   }
@@ -296,10 +305,11 @@ bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector
 // direction a < b. Returns 0 when the pair is not two boxes (or they overlap too deep, see
 // below), 1 when it was found here (points appended), 2 when it is left to the other direction
 int World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
-  if (!settings_.box_contacts || b == kGround) return 0;
+  if (!settings_.box_contacts || b == kGround || !defs_[a].box || !defs_[b].box) return 0;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
-  if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b)) return 0;
+  body_box(a, pose_a, box_a);
+  body_box(b, pose_b, box_b);
   // deeper than a quarter of the thinner box the axis of least overlap may be the far side's
   // (a box driven past a wall's middle in one long step would be pushed on through): the
   // samples then, both ways, with their own guard for deep points (see apply_contact_impulse)

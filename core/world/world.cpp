@@ -61,6 +61,7 @@ int World::add_body(const BodyDesc& desc) {
   def.friction = desc.friction;
   def.restitution = desc.restitution;
   def.shape = desc.shape;
+  def.box = dynamic_cast<const BoxDistance*>(def.shape.get());
   def.samples = desc.samples;
   def.sample_blocks = sample_blocks(def.samples);
   def.center = desc.unit_mass.center;
@@ -79,6 +80,7 @@ int World::add_body(const BodyDesc& desc) {
     if (def.inertia.maxCoeff() - def.inertia.minCoeff() <= 1e-12 * def.inertia.maxCoeff()) {
       def.inertia.setConstant(def.inertia.mean());
       def.isotropic = true;
+      def.mesh_axes = Mat3::Identity();  // (every frame is principal: the mesh's own)
     }
     def.inverse_inertia = def.inertia.cwiseInverse();
   }
@@ -375,8 +377,8 @@ double World::pair_penetration(const BodyPair& pair) const {
   // can exceed (moving a point at depth d out of a convex body takes a translation >= d)
   OrientedBox box_a, box_b;
   const bool boxes = pair.b != kGround &&
-                     oriented_box(defs_[pair.a].shape.get(), mesh_pose(defs_[pair.a], states_[pair.a]), box_a) &&
-                     oriented_box(defs_[pair.b].shape.get(), mesh_pose(defs_[pair.b], states_[pair.b]), box_b);
+                     body_box(pair.a, mesh_pose(defs_[pair.a], states_[pair.a]), box_a) &&
+                     body_box(pair.b, mesh_pose(defs_[pair.b], states_[pair.b]), box_b);
   if (boxes) return box_overlap_depth(box_a, box_b);
   double deepest = 0.0;
   for (const auto& [a, b] : {std::pair{pair.a, pair.b}, std::pair{pair.b, pair.a}}) {

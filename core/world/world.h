@@ -27,6 +27,7 @@
 #include "cloth/self_collision.h"
 #include "contact/body_features.h"
 #include "geometry/mass_properties.h"
+#include "rigid/box_contact.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
@@ -308,6 +309,12 @@ class World {
   bool samples_inside(int a, int b, double s, double margin, bool exact_boxes, std::vector<Penetration>& out) const;
   bool box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   int box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  // body i as an oriented box at the pose, when its shape is a box
+  bool body_box(int i, const Pose& pose, OrientedBox& out) const {
+    if (defs_[i].box == nullptr) return false;
+    out = {pose.translation, pose.rotation, defs_[i].box->half()};
+    return true;
+  }
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
