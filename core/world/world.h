@@ -41,7 +41,7 @@ namespace simbake {
 struct WorldSettings {
   Vec3 gravity = Vec3(0.0, -9.81, 0.0);  // (m/s^2)
   int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
-  int contact_sweeps = 10;               // inelastic sweeps over all pairs (at most)
+  int contact_sweeps = 6;                // inelastic sweeps over all pairs (at most)
   int shock_sweeps = 10;                 // sweeps per level of shock propagation (at most)
   double sleep_speed = 0.01;             // (m/s) a body whose points stray less than
   double sleep_time = 0.5;               // (s) sleep_speed * sleep_time / 2 for sleep_time
