@@ -167,9 +167,8 @@ Pose World::pose_at(int i, double s) const {
   return mesh_pose(defs_[i], between);
 }
 
-void World::find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const {
+void World::find_penetrations(int a, int b, double margin, long long tests, std::vector<Penetration>& out) const {
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
-  const long long tests = sweep_tests(a, b);
   // (a fast pair reports the first fraction with a point inside: no margin there, and its
   // samples, not the boxes' exact contact: the impacts of the swept test are the samples')
   if (tests > 1) margin = 0.0;
@@ -191,21 +190,15 @@ void World::find_penetrations(int a, int b, double margin, std::vector<Penetrati
     }
   }
   for (long long k = first; k <= last; ++k) {
-    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, tests == 1, out)) return;
+    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, out)) return;
   }
 }
 
 // Appends a's samples inside b at fraction s of the step, and with a margin > 0 those outside
 // closer than the margin too (but none within kTouching of the surface, see below); true when
-// there were any. With exact_boxes, two boxes meet by box_pair_contact instead
-bool World::samples_inside(int a, int b, double s, double margin, bool exact_boxes,
-                           std::vector<Penetration>& out) const {
+// there were any
+bool World::samples_inside(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
   const std::size_t before = out.size();
-  switch (exact_boxes ? box_pair_contact(a, b, s, margin, out) : 0) {
-    case 1: return out.size() > before;
-    case 2: return false;  // (the pair's other direction found them)
-    default: break;
-  }
   const Pose pose_a = pose_at(a, s);
   const Points& samples = defs_[a].samples;
   // cull in a's mesh frame: only samples within b's bounding sphere (or below the ground
@@ -301,11 +294,11 @@ bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector
 // lie on a's surface, each with its depth along the contact normal; like an edge crossing
 // (see box_edge_crossing) each is carried by both bodies, a's point in a's frame and the
 // matching point of b (depth along the normal) in b's, so that refresh_contact measures the
-// separation of the two along the normal carried by b. The pair is found once, in the
-// direction a < b. Returns 0 when the pair is not two boxes (or they overlap too deep, see
-// below), 1 when it was found here (points appended), 2 when it is left to the other direction
-int World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
-  if (!settings_.box_contacts || b == kGround || !defs_[a].box || !defs_[b].box) return 0;
+// separation of the two along the normal carried by b. The pair is found once, for both
+// directions. False when the pair is not two boxes or they overlap too deep (see below: the
+// samples then, both ways); true when it was found here (its points appended, if any)
+bool World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
+  if (!settings_.box_contacts || b == kGround || !defs_[a].box || !defs_[b].box) return false;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
   body_box(a, pose_a, box_a);
@@ -314,10 +307,9 @@ int World::box_pair_contact(int a, int b, double s, double margin, std::vector<P
   // (a box driven past a wall's middle in one long step would be pushed on through): the
   // samples then, both ways, with their own guard for deep points (see apply_contact_impulse)
   const double trusted = kTrustedDepth * std::min(defs_[a].thickness, defs_[b].thickness);
-  if (a > b) return box_overlap_depth(box_a, box_b) > trusted ? 0 : 2;
   BoxContact contact;
-  if (!box_box_contact(box_a, box_b, margin, contact)) return 1;
-  if (contact.depth > trusted) return 0;
+  if (!box_box_contact(box_a, box_b, margin, contact)) return true;
+  if (contact.depth > trusted) return false;
   const Vec3 normal_b = pose_b.rotation.transpose() * contact.normal;
   for (int k = 0; k < contact.count; ++k) {
     const double depth = contact.points[k].depth;
@@ -328,7 +320,7 @@ int World::box_pair_contact(int a, int b, double s, double margin, std::vector<P
     out.push_back({a, b, candidate_poses_[a].apply(m), contact.normal, -depth, m, s, true,
                    pose_b.apply_inverse(on_a + depth * contact.normal), normal_b});
   }
-  return 1;
+  return true;
 }
 
 // Body i's K at world point x, lever arm from its candidate centre of mass; zero for the
@@ -434,7 +426,10 @@ void World::resolve_collisions(double dt) {
   // within the sweeps; later sweeps re-test only those (a point farther out than the margin
   // at the first sweep stays outside)
   std::vector<std::vector<Penetration>>& inside = pair_scratch_;
-  find_pair_penetrations(inside, settings_.speculative_contacts);
+  find_pair_penetrations(inside, settings_.speculative_contacts, /*reuse=*/false);
+  // the bodies' versions now: those that change took an impulse (see find_pair_penetrations)
+  std::vector<std::uint64_t>& before = collision_versions_;
+  before.assign(version_.begin(), version_.end());
   // islands of the pairs with samples inside (the others have nothing to do), each swept on
   // its own and in parallel as in resolve_contacts: an island whose sweep applies no impulse
   // revisits no pair after it, so stopping it there gives the bits of the global sweeps
@@ -493,6 +488,8 @@ void World::resolve_collisions(double dt) {
     }
   });
   collect_impulses();
+  collided_.resize(body_count());
+  for (int i = 0; i < body_count(); ++i) collided_[i] = version_[i] != before[i];
 }
 
 // Velocities: gravity on every dynamic body (no torque: it acts at the centre of mass)
@@ -651,16 +648,26 @@ void World::reduce_contact_points(std::vector<Penetration>& points) {
 
 bool World::deeper(const Penetration& l, const Penetration& r) { return l.phi < r.phi; }
 
-// Every pair's penetrating samples, both directions (pair order, then sample order). Pairs
-// are independent and read-only here, so they run in parallel; each writes only its own list,
-// so the result is the same for any number of threads.
-void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative) const {
+// Every pair's penetrating samples, both directions (pair order, then sample order); two boxes
+// by their exact contact, once for the pair. Pairs are independent and read-only here, so they
+// run in parallel; each writes only its own list, so the result is the same for any number of
+// threads. With reuse (the contact stage), a pair whose bodies took no collision impulse keeps
+// the list the collision stage found: its candidates are the same, bit for bit (x + dt (v + dt
+// g) either way, the same rotation), and so are its margin (see contact_margin) and its one
+// test; the narrow phase then runs once per step for most of a resting pile
+void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative, bool reuse) {
   out.resize(pairs_.size());
+  single_test_.resize(pairs_.size());
   tbb::parallel_for(std::size_t(0), pairs_.size(), [&](std::size_t k) {
+    const int a = pairs_[k].a, b = pairs_[k].b;
+    if (reuse && single_test_[k] && !collided_[a] && (b == kGround || !collided_[b])) return;
     out[k].clear();
-    const double margin = speculative ? contact_margin(pairs_[k].a, pairs_[k].b) : 0.0;
-    find_penetrations(pairs_[k].a, pairs_[k].b, margin, out[k]);
-    if (pairs_[k].b != kGround) find_penetrations(pairs_[k].b, pairs_[k].a, margin, out[k]);
+    const double margin = speculative ? contact_margin(a, b) : 0.0;
+    const long long tests = sweep_tests(a, b);  // (the same both ways)
+    single_test_[k] = tests == 1;
+    if (tests == 1 && box_pair_contact(a, b, 1.0, margin, out[k])) return;
+    find_penetrations(a, b, margin, tests, out[k]);
+    if (b != kGround) find_penetrations(b, a, margin, tests, out[k]);
   });
 }
 
@@ -687,7 +694,7 @@ double World::contact_margin(int a, int b) const {
   double cap = std::numeric_limits<double>::infinity();
   for (int i : {a, b}) {
     if (i == kGround) continue;
-    margin += 0.5 * dt_ * states_[i].v.norm();
+    margin += 0.5 * dt_ * candidates_[i].v.norm();  // (the velocity over the step, gravity in)
     cap = std::min(cap, kTrustedDepth * defs_[i].thickness);
   }
   for (int i : {a, b}) {
@@ -699,7 +706,7 @@ double World::contact_margin(int a, int b) const {
 void World::find_contacts() {
   // per pair: each direction deepest first and reduced, then the pair's points deepest first
   std::vector<std::vector<Penetration>>& found = pair_scratch_;
-  find_pair_penetrations(found, settings_.speculative_contacts);
+  find_pair_penetrations(found, settings_.speculative_contacts, /*reuse=*/true);
   tbb::parallel_for(std::size_t(0), found.size(), [&](std::size_t k) {
     std::vector<Penetration>& points = found[k];
     const auto split = std::stable_partition(points.begin(), points.end(),

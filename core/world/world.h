@@ -302,13 +302,13 @@ class World {
   void mark_stale(int i, ImpulseLog& log);
   void refresh_stale_candidates(ImpulseLog& log);
   Vec3 point_velocity(int i, const Vec3& x) const;
-  void find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const;
+  void find_penetrations(int a, int b, double margin, long long tests, std::vector<Penetration>& out) const;
   double contact_margin(int a, int b) const;
   long long sweep_tests(int a, int b) const;
   Pose pose_at(int i, double s) const;
-  bool samples_inside(int a, int b, double s, double margin, bool exact_boxes, std::vector<Penetration>& out) const;
+  bool samples_inside(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   bool box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
-  int box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  bool box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   // body i as an oriented box at the pose, when its shape is a box
   bool body_box(int i, const Pose& pose, OrientedBox& out) const {
     if (defs_[i].box == nullptr) return false;
@@ -320,7 +320,7 @@ class World {
   void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log);
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
-  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative) const;
+  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative, bool reuse);
   void find_contacts();
   static void reduce_to_four(std::vector<Penetration>& points);
   static void reduce_contact_points(std::vector<Penetration>& points);
@@ -371,6 +371,9 @@ class World {
   ImpulseLog log_;                          // the serial stages' impulses
   GridScratch grid_;                        // reused by overlapping_pairs
   std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
+  std::vector<char> single_test_;           // (npair) the collision stage tested the pair once
+  std::vector<std::uint64_t> collision_versions_;  // (nbody) versions when the collision sweeps began
+  std::vector<char> collided_;              // (nbody) took a collision impulse this step
   double dt_ = 0.0;                         // current substep (s)
   double time_ = 0.0;                       // simulated time at the start of the step (s)
   bool candidates_with_forces_ = false;     // collision stage: candidates include gravity
