@@ -380,7 +380,7 @@ bool World::apply_collision_impulse(const Penetration& p, double restitution, do
 // deepest: the step cannot tell which came first, and they are struck together. A face landing flat
 // (or an edge) is then hit at its middle, as a square hit must be, not at whichever corner
 // round-off made deepest, which would spin the body and let friction throw it sideways.
-World::Penetration World::struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const {
+Penetration World::struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const {
   // an impact, not settling: slower than 1 m/s, or than gravity adds in two substeps, is a
   // stack settling, the contact stage's to finish; it keeps its single points (with the
   // centroid, the 15-row pyramid at 1/60 s substeps falls)
@@ -586,67 +586,6 @@ void World::find_islands() {
   }
 }
 
-// Keeps at most four of a group of penetrating points that push the same way: the deepest,
-// the one farthest from it, the one that spans the largest triangle with those two, and the
-// one farthest outside that triangle. A rigid body's velocity is linear in position, so if
-// these points stop approaching so does every point of the flat contact they span; for a
-// face on a face this replaces ~16 points by 4 for the same answer. Deterministic: ties go
-// to the earlier point. `points` is sorted deepest first.
-void World::reduce_to_four(std::vector<Penetration>& points) {
-  const std::size_t count = points.size();
-  if (count <= 4) return;
-  std::size_t keep[4] = {0, 0, 0, 0};
-  for (std::size_t round = 1; round < 4; ++round) {
-    const Vec3 &p0 = points[keep[0]].x, &p1 = points[keep[1]].x, &p2 = points[keep[2]].x;
-    const Vec3 normal = (p1 - p0).cross(p2 - p0);
-    double best = -1.0;
-    for (std::size_t k = 0; k < count; ++k) {
-      const Vec3& x = points[k].x;
-      double score;
-      if (round == 1) {
-        score = (x - p0).squaredNorm();
-      } else if (round == 2) {
-        score = (p1 - p0).cross(x - p0).squaredNorm();
-      } else {  // outside the triangle: the largest of its distances beyond the three edges
-        score = 0.0;
-        for (const auto& [from, to] : {std::pair{p0, p1}, std::pair{p1, p2}, std::pair{p2, p0}}) {
-          const Vec3 c = (to - from).cross(x - from);
-          if (c.dot(normal) < 0.0) score = std::max(score, c.squaredNorm());
-        }
-      }
-      if (score > best) {
-        best = score;
-        keep[round] = k;
-      }
-    }
-  }
-  std::vector<Penetration> kept;
-  for (std::size_t round = 0; round < 4; ++round) {
-    if (std::find(keep, keep + round, keep[round]) == keep + round) kept.push_back(points[keep[round]]);
-  }
-  points.swap(kept);
-}
-
-// Reduces the points of one pair and direction (deepest first) group by group: a group is
-// every remaining point whose normal is within ~25 degrees of the deepest remaining one's,
-// so points that push different ways (an edge caught on a side face, the two arms of a
-// torus on a post) keep their own representatives
-void World::reduce_contact_points(std::vector<Penetration>& points) {
-  std::vector<Penetration> rest, result, group, others;
-  rest.swap(points);
-  while (!rest.empty()) {
-    group.clear();
-    others.clear();
-    const Vec3 n0 = rest.front().n;
-    for (const Penetration& p : rest) (p.n.dot(n0) > 0.9 ? group : others).push_back(p);
-    reduce_to_four(group);
-    result.insert(result.end(), group.begin(), group.end());
-    rest.swap(others);
-  }
-  points.swap(result);
-}
-
-bool World::deeper(const Penetration& l, const Penetration& r) { return l.phi < r.phi; }
 
 // Every pair's penetrating samples, both directions (pair order, then sample order); two boxes
 // by their exact contact, once for the pair. Pairs are independent and read-only here, so they

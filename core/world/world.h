@@ -28,6 +28,7 @@
 #include "contact/body_features.h"
 #include "geometry/mass_properties.h"
 #include "rigid/box_contact.h"
+#include "rigid/contact_points.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
@@ -178,24 +179,6 @@ class World {
   static constexpr int kGround = -1;
   static constexpr double kTouching = 1e-9;  // (m) closer than this to a surface is touching
 
-  // A sample point of body `a` found inside body `b` (or the ground) at the candidates
-  struct Penetration {
-    int a, b;
-    Vec3 x;      // world position of the sample (m)
-    Vec3 n;      // unit normal of b's level set at x, world, pointing towards a
-    double phi;  // b's signed distance at x (m), negative
-    Vec3 local;  // the point in a's mesh frame: a surface sample, or the deepest point of a
-                 // box's edge crossing another box's edge (see box_edge_crossing)
-    double s = 1.0;  // fraction of the step at which x, n and phi were taken (1: the candidates;
-                     // less for a fast pair, see sweep_tests); x is then where the sample is
-                     // at the candidates, so that lever arms are from the candidate centres
-    // an edge crossing an edge (see box_edge_crossing): the point of b's edge nearest a's,
-    // in b's mesh frame, and the normal in b's frame; phi is then the separation of the two
-    // points along the normal, not b's level set
-    bool crossing = false;
-    Vec3 local_b = Vec3::Zero();
-    Vec3 normal_b = Vec3::Zero();
-  };
   // A contact point of the contact stage, found when the stage begins
   struct ContactPoint {
     Penetration point;
@@ -322,9 +305,6 @@ class World {
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
   void find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative, bool reuse);
   void find_contacts();
-  static void reduce_to_four(std::vector<Penetration>& points);
-  static void reduce_contact_points(std::vector<Penetration>& points);
-  static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact, ImpulseLog& log);
   void find_islands();
