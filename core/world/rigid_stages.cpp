@@ -38,16 +38,6 @@ constexpr double kTrustedDepth = 0.25;  // of the thinner body's thickness: deep
                                         // set's normal no longer points the way out
 constexpr double kImpactSpeed = 1.0;    // (m/s) slower approaches are settling, not impacts
 constexpr double kCrossingSine = 0.2;   // sin(11.5 deg): box edges closer to parallel are left to the samples
-
-// Union-find over bodies: every body its own set, then the root of i's set (path halving)
-void reset_sets(std::vector<int>& parent, int n) {
-  parent.resize(n);
-  std::iota(parent.begin(), parent.end(), 0);
-}
-int set_root(std::vector<int>& parent, int i) {
-  while (parent[i] != i) i = parent[i] = parent[parent[i]];
-  return i;
-}
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -438,7 +428,7 @@ void World::resolve_collisions(double dt) {
   for (std::size_t k = 0; k < pairs_.size(); ++k) {
     islands.links[k] = inside[k].empty() ? std::array<int, 2>{-1, -1} : std::array<int, 2>{pairs_[k].a, pairs_[k].b};
   }
-  find_islands();
+  find_islands(defs_, islands_);
   // each sweep's order of the island's pairs: all pairs shuffled, then taken island by island
   const int sweeps = settings_.collision_sweeps;
   const int m = islands.item_start[islands.count];
@@ -519,7 +509,7 @@ void World::resolve_contacts(double dt) {
   find_contacts();
   islands_.links.resize(contacts_.size());
   for (std::size_t k = 0; k < contacts_.size(); ++k) islands_.links[k] = {contacts_[k].point.a, contacts_[k].point.b};
-  find_islands();
+  find_islands(defs_, islands_);
   const IslandScratch& islands = islands_;
   tbb::parallel_for(0, islands.count, [&](int k) {
     ImpulseLog& log = islands_.logs[k];
@@ -535,56 +525,6 @@ void World::resolve_contacts(double dt) {
   collect_impulses();
 }
 
-// The islands of islands_.links (item k links bodies a and b; a < 0: item k is in no
-// island), numbered in the order of their first item, each with its items in order; their
-// logs start empty
-void World::find_islands() {
-  const int n = body_count();
-  IslandScratch& islands = islands_;
-  const std::vector<std::array<int, 2>>& links = islands.links;
-  std::vector<int>& parent = islands.parent;
-  reset_sets(parent, n);
-  auto root = [&](int i) { return set_root(parent, i); };
-  auto dynamic = [&](int i) { return i >= 0 && !defs_[i].kinematic; };
-  for (const auto& [a, b] : links) {
-    if (dynamic(a) && dynamic(b)) parent[root(a)] = root(b);
-  }
-  // each item's island is that of its dynamic body (a pair or contact has one at least)
-  std::vector<int>& index = islands.index;
-  std::vector<int>& of_item = islands.of_item;
-  index.assign(n, -1);
-  of_item.resize(links.size());
-  islands.count = 0;
-  for (std::size_t k = 0; k < links.size(); ++k) {
-    const auto& [a, b] = links[k];
-    of_item[k] = -1;
-    if (a < 0) continue;
-    const int r = root(dynamic(a) ? a : b);
-    if (index[r] < 0) index[r] = islands.count++;
-    of_item[k] = index[r];
-  }
-  std::vector<int>& of_body = islands.of_body;
-  of_body.resize(n);
-  for (int i = 0; i < n; ++i) of_body[i] = index[root(i)];
-  // items by island (a counting sort keeps their order)
-  std::vector<int>& start = islands.item_start;
-  start.assign(islands.count + 1, 0);
-  for (int island : of_item) {
-    if (island >= 0) ++start[island + 1];
-  }
-  std::partial_sum(start.begin(), start.end(), start.begin());
-  std::vector<int>& filled = islands.filled;
-  filled.assign(start.begin(), start.end() - 1);
-  islands.items.resize(start.back());
-  for (std::size_t k = 0; k < links.size(); ++k) {
-    if (of_item[k] >= 0) islands.items[filled[of_item[k]]++] = static_cast<int>(k);
-  }
-  if (static_cast<int>(islands.logs.size()) < islands.count) islands.logs.resize(islands.count);
-  for (int k = 0; k < islands.count; ++k) {
-    islands.logs[k].stale.clear();
-    islands.logs[k].impulses = 0;
-  }
-}
 
 
 // Every pair's penetrating samples, both directions (pair order, then sample order); two boxes

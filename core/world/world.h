@@ -29,6 +29,7 @@
 #include "geometry/mass_properties.h"
 #include "rigid/box_contact.h"
 #include "rigid/contact_points.h"
+#include "rigid/islands.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
@@ -196,32 +197,6 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
-  // What impulses leave behind, per island (or per serial stage): the bodies whose
-  // candidates are stale, and how many impulses were applied
-  struct ImpulseLog {
-    std::vector<int> stale;
-    long long impulses = 0;
-  };
-  // The islands of an impulse stage (see resolve_contacts), rebuilt by each stage from its
-  // items: the pairs with samples inside (collisions) or the contacts
-  struct IslandScratch {
-    int count = 0;
-    std::vector<std::array<int, 2>> links;    // (nitem) bodies of each item; -1: in no island
-    std::vector<int> parent;                  // (nbody) union-find through the links
-    std::vector<int> index;                   // (nbody) island of a root body, else -1
-    std::vector<int> of_body;                 // (nbody) island of each body, -1 when unlinked
-    std::vector<int> of_item;                 // (nitem) island of each item, or -1
-    std::vector<int> item_start;              // (count + 1) island k's items are
-    std::vector<int> items;                   //   items[item_start[k] .. item_start[k + 1])
-    std::vector<int> filled;                  // (count) counting-sort cursors
-    std::vector<int> order;                   // (npair) collisions: a sweep's shuffled pairs
-    std::vector<int> by_sweep;                // (sweeps x nitem) collisions: island k's pairs
-                                              //   in sweep s at s nitem + item_start[k] ..
-    std::vector<int> body_start;              // (count + 1) island k's bodies with a level,
-    std::vector<int> bodies;                  //   by level, likewise (shock propagation)
-    std::vector<std::vector<int>> by_level;   // (count) island k's contacts by level
-    std::vector<ImpulseLog> logs;             // (count)
-  };
   // per-step scratch of shock propagation, kept so that a step allocates nothing
   struct ShockScratch {
     std::vector<Vec3> v_before, l_before;     // (nbody) velocities before the levels
@@ -307,7 +282,6 @@ class World {
   void find_contacts();
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact, ImpulseLog& log);
-  void find_islands();
   void collect_impulses();
   void assign_contact_levels();
   bool check_finite() const;
