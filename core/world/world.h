@@ -30,6 +30,7 @@
 #include "rigid/box_contact.h"
 #include "rigid/contact_points.h"
 #include "rigid/islands.h"
+#include "rigid/overlapping_pairs.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
@@ -209,15 +210,6 @@ class World {
     std::vector<int> group;                   // (nbody) union-find of contact groups
     std::vector<char> thrown;                 // (nbody) group roots thrown off by the levels
   };
-  // scratch of the broad phase's grid (see overlapping_pairs)
-  struct GridScratch {
-    std::vector<double> sides;                  // largest side of each finite box (m)
-    std::vector<std::array<long long, 6>> ranges;  // (nbody) cells a box covers, lower and
-                                                // upper (x, y, z); lower x -1 for a large box
-    std::vector<int> large;                     // boxes tested against every other box
-    std::vector<int> cell_start;                // (ncell + 1) cell c holds
-    std::vector<int> members;                   // members[cell_start[c] .. cell_start[c + 1])
-  };
   // one substep of the rigid bodies (every stage but step_cloths)
   void step_bodies(double dt);
   // the automatic substeps and cloth steps of the next frame (see automatic_substeps)
@@ -245,7 +237,6 @@ class World {
   bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
   bool moving_kinematic(int i) const;
   void compute_boxes(double dt);
-  void overlapping_pairs(std::vector<std::pair<int, int>>& out);
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
   // a box's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
