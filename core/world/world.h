@@ -44,8 +44,11 @@ namespace simbake {
 struct WorldSettings {
   Vec3 gravity = Vec3(0.0, -9.81, 0.0);  // (m/s^2)
   int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
-  int contact_sweeps = 6;                // inelastic sweeps over all pairs (at most)
-  int shock_sweeps = 10;                 // sweeps per level of shock propagation (at most)
+  int contact_sweeps = 6;                // inelastic sweeps over all pairs (at most; was 10)
+  int shock_sweeps = 10;                 // sweeps per level of shock propagation (at most; was
+                                         // 20). Fewer: the 1000-box piles 1.2x faster and no
+                                         // deeper; the tower of 10 drifts 1.3 mm, not 0.4
+                                         // (benchmarks/results/rigid_speed.md)
   double sleep_speed = 0.01;             // (m/s) a body whose points stray less than
   double sleep_time = 0.5;               // (s) sleep_speed * sleep_time / 2 for sleep_time
                                          // may sleep; sleep_time 0 disables sleeping
