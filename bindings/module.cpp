@@ -185,7 +185,7 @@ PYBIND11_MODULE(_core, m) {
   py::class_<World>(m, "World")
       .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
                        double travel_fraction, int max_substeps, int threads, double cloth_max_substep,
-                       bool speculative_contacts, double contact_tolerance, bool box_contacts,
+                       bool speculative_contacts, double contact_tolerance, bool box_contacts, int shock_sweeps,
                        bool cloth_contacts_in_solve) {
              WorldSettings s;
              s.gravity = gravity;
@@ -198,6 +198,8 @@ PYBIND11_MODULE(_core, m) {
              s.cloth_max_substep = positive(cloth_max_substep, "cloth_max_substep");
              s.speculative_contacts = speculative_contacts;
              s.box_contacts = box_contacts;
+             if (shock_sweeps < 0) throw std::invalid_argument("shock_sweeps must be >= 0");
+             s.shock_sweeps = shock_sweeps;
              s.cloth_contacts_in_solve = cloth_contacts_in_solve;
              s.contact_tolerance = positive(contact_tolerance, "contact_tolerance");
              positive(max_substep, "max_substep");
@@ -215,6 +217,7 @@ PYBIND11_MODULE(_core, m) {
            py::arg("speculative_contacts") = WorldSettings().speculative_contacts,
            py::arg("contact_tolerance") = WorldSettings().contact_tolerance,
            py::arg("box_contacts") = WorldSettings().box_contacts,
+           py::arg("shock_sweeps") = WorldSettings().shock_sweeps,
            py::arg("cloth_contacts_in_solve") = WorldSettings().cloth_contacts_in_solve)
       .def("set_ground", [](World& w, double height, double friction, double restitution) {
              w.set_ground(GroundDef{height, friction, restitution});

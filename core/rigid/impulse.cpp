@@ -59,18 +59,17 @@ Vec3 contact_impulse_update(const Mat3& K, const Vec3& n, const Vec3& v, const V
   Vec3 jt = total - jn_old * n;
   if (friction <= 0.0 || jn == 0.0) return jn * n;
   // friction along the slip, with the velocity the normal update leaves
+  // (the slip s = |s| T is stopped by -(|s| / T.K T) T = -(s.s / s.K s) s: no square root)
   const Vec3 v_after = v + K * ((jn - jn_old) * n);
   const Vec3 slip = v_after - v_after.dot(n) * n;
-  const double slip_speed = slip.norm();
-  if (slip_speed > 0.0) {
-    const Vec3 T = slip / slip_speed;
-    jt -= (slip_speed / T.dot(K * T)) * T;
-  }
+  const double slip_squared = slip.squaredNorm(), slip_k = slip.dot(K * slip);
+  if (slip_squared > 0.0 && slip_k > 0.0) jt -= (slip_squared / slip_k) * slip;
   // onto the cone; when it binds, the magnitude is re-solved along the clamped direction D so
   // that the normal condition holds exactly: J = j (n + mu D), n.(v_free + K J) = 0 (the
   // notes' sliding impulse with -T = D)
-  const double limit = friction * jn, length = jt.norm();
-  if (length <= limit) return jn * n + jt;
+  const double limit = friction * jn;
+  if (jt.squaredNorm() <= limit * limit) return jn * n + jt;
+  const double length = jt.norm();
   const Vec3 direction = n + friction * (jt / length);
   const double denominator = n.dot(K * direction);
   const double j = (target_speed - n.dot(v - K * total)) / denominator;

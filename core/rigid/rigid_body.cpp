@@ -23,7 +23,8 @@ std::vector<SampleBlock> sample_blocks(const Points& samples) {
 Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state) {
   // a mesh point m sits at x + R(q) P^T (m - c): rotation R(q) P^T, translation x - R c
   Pose pose;
-  pose.rotation = state.q.toRotationMatrix() * def.mesh_axes.transpose();
+  // (an isotropic body's principal axes are its mesh axes: see RigidBodyDef::isotropic)
+  pose.rotation = def.isotropic ? state.q.toRotationMatrix() : Mat3(state.q.toRotationMatrix() * def.mesh_axes.transpose());
   pose.translation = state.x - pose.rotation * def.center;
   return pose;
 }
@@ -36,11 +37,13 @@ void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orie
 }
 
 Mat3 world_inverse_inertia(const RigidBodyDef& def, const Quat& q) {
+  if (def.isotropic) return def.inverse_inertia[0] * Mat3::Identity();
   const Mat3 R = q.toRotationMatrix();
   return R * def.inverse_inertia.asDiagonal() * R.transpose();
 }
 
 Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state) {
+  if (def.isotropic) return def.inverse_inertia[0] * state.l;
   const Vec3 body_l = state.q.conjugate() * state.l;
   return state.q * Vec3(def.inverse_inertia.cwiseProduct(body_l));
 }
@@ -53,6 +56,9 @@ Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double
   // turns the body more than kMaxTurn about any axis is taken as that many equal pieces (the
   // 6 rad/s brick of benchmarks/rigid_spin.py then drifts as little at 1/120 s steps as at
   // 1/240 s; a body at rest or tumbling slowly takes one piece, as before)
+  // An isotropic body's omega = L / I is constant in the world: q <- exp(dt omega) q, exact,
+  // one rotation instead of five per piece
+  if (def.isotropic) return (quat_from_rotation_vector(dt * def.inverse_inertia[0] * l) * q).normalized();
   static constexpr double kMaxTurn = 0.03;  // (rad)
   static constexpr int kAxis[5] = {0, 1, 2, 1, 0};
   static constexpr double kFraction[5] = {0.5, 0.5, 1.0, 0.5, 0.5};

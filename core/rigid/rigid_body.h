@@ -52,8 +52,12 @@ struct RigidBodyDef {
   double friction = 0.5;                     // Coulomb coefficient
   double restitution = 0.0;                  // in [0, 1]
   bool kinematic = false;                    // infinite mass, moved only by its own motion
+  bool isotropic = false;                    // equal principal moments (a cube, a sphere): the
+                                             // torque-free rotation is exact, about L at |L| / I;
+                                             // its mesh axes are its principal axes
   SignedDistancePtr shape;                   // signed distance in mesh coordinates; null when
                                              // nothing can touch the body (no grid baked)
+  const BoxDistance* box = nullptr;          // the shape when it is a box (exact box contacts)
   Points samples;                            // (s x 3) surface samples in mesh coordinates (m)
   std::vector<SampleBlock> sample_blocks;    // (ceil(s / 8)) their bounding spheres, in order
   double bounding_radius = 0.0;              // largest |sample - center| (m)
@@ -94,6 +98,7 @@ Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state);
 // bounded (symplectic, time reversible), and the intermediate-axis instability appears as it
 // should. McLachlan 1993; Touma and Wisdom 1994. A step turning the body more than 0.03 rad
 // about an axis is taken in equal pieces (the error grows with the square of the turn).
+// An isotropic body (def.isotropic) turns exactly, about L at the rate |L| / I, in one rotation.
 Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt);
 
 // Rotation of a kinematic body spinning at a fixed world angular velocity omega over dt

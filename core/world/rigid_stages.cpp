@@ -38,16 +38,6 @@ constexpr double kTrustedDepth = 0.25;  // of the thinner body's thickness: deep
                                         // set's normal no longer points the way out
 constexpr double kImpactSpeed = 1.0;    // (m/s) slower approaches are settling, not impacts
 constexpr double kCrossingSine = 0.2;   // sin(11.5 deg): box edges closer to parallel are left to the samples
-
-// Union-find over bodies: every body its own set, then the root of i's set (path halving)
-void reset_sets(std::vector<int>& parent, int n) {
-  parent.resize(n);
-  std::iota(parent.begin(), parent.end(), 0);
-}
-int set_root(std::vector<int>& parent, int i) {
-  while (parent[i] != i) i = parent[i] = parent[parent[i]];
-  return i;
-}
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -82,7 +72,13 @@ void World::update_candidate(int i) {
     c.x = s.x + dt_ * v;
     c.v = v;
     c.q = free_rotation(def, s.q, s.l, dt_);
-    if (average_velocities_) omega_[i] = rotation_vector_from_quat(c.q * s.q.conjugate()) / dt_;
+    if (average_velocities_) {
+      // (an isotropic body turns at L / I exactly, the rotation vector's shorter way round
+      // while it turns less than half a turn in the step)
+      const Vec3 spin = def.inverse_inertia[0] * s.l;
+      omega_[i] = def.isotropic && dt_ * spin.norm() < 3.0 ? spin
+                                                           : Vec3(rotation_vector_from_quat(c.q * s.q.conjugate()) / dt_);
+    }
   }
   candidate_poses_[i] = mesh_pose(def, c);
   stale_[i] = 0;
@@ -132,12 +128,21 @@ long long World::sweep_tests(int a, int b) const {
   // the contact stage works at the candidates: the collision stage has turned back whatever
   // approached fast, and a body sliding fast over another keeps its contacts where it ends
   if (average_velocities_) return 1;
+  const Vec3 relative = (candidates_[a].x - states_[a].x) - (candidates_[b].x - states_[b].x);
+  const double spacing = 2.0 * settings_.travel_fraction * std::min(defs_[a].thickness, defs_[b].thickness);
+  // the turn's angle 2 atan2(|u|, |w|) of the relative rotation u + w is at most 2 |u| / |w|:
+  // a pair that travels less than the spacing even by that bound takes one test, as it would
+  // by the exact angle (most pairs; the arc tangent is left to the others)
+  auto turn_bound = [&](int i) {
+    const Quat d = candidates_[i].q * states_[i].q.conjugate();
+    const double w = std::abs(d.w());
+    return w > 0.5 ? 2.0 * d.vec().norm() / w * defs_[i].bounding_radius : std::numeric_limits<double>::infinity();
+  };
+  if (relative.norm() + turn_bound(a) + turn_bound(b) <= spacing) return 1;
   auto turn = [&](int i) {
     return candidates_[i].q.angularDistance(states_[i].q) * defs_[i].bounding_radius;
   };
-  const Vec3 relative = (candidates_[a].x - states_[a].x) - (candidates_[b].x - states_[b].x);
   const double travel = relative.norm() + turn(a) + turn(b);
-  const double spacing = 2.0 * settings_.travel_fraction * std::min(defs_[a].thickness, defs_[b].thickness);
   const double tests = std::ceil(travel / spacing);
   // (a cap far beyond any speed a scene can mean, so that the count stays an integer)
   return std::isfinite(tests) ? static_cast<long long>(std::clamp(tests, 1.0, 1e15)) : 1;
@@ -152,9 +157,8 @@ Pose World::pose_at(int i, double s) const {
   return mesh_pose(defs_[i], between);
 }
 
-void World::find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const {
+void World::find_penetrations(int a, int b, double margin, long long tests, std::vector<Penetration>& out) const {
   if (b != kGround && !defs_[b].shape) return;  // nothing can enter a body without a shape
-  const long long tests = sweep_tests(a, b);
   // (a fast pair reports the first fraction with a point inside: no margin there, and its
   // samples, not the boxes' exact contact: the impacts of the swept test are the samples')
   if (tests > 1) margin = 0.0;
@@ -176,21 +180,15 @@ void World::find_penetrations(int a, int b, double margin, std::vector<Penetrati
     }
   }
   for (long long k = first; k <= last; ++k) {
-    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, tests == 1, out)) return;
+    if (samples_inside(a, b, static_cast<double>(k) / tests, margin, out)) return;
   }
 }
 
 // Appends a's samples inside b at fraction s of the step, and with a margin > 0 those outside
 // closer than the margin too (but none within kTouching of the surface, see below); true when
-// there were any. With exact_boxes, two boxes meet by box_pair_contact instead
-bool World::samples_inside(int a, int b, double s, double margin, bool exact_boxes,
-                           std::vector<Penetration>& out) const {
+// there were any
+bool World::samples_inside(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
   const std::size_t before = out.size();
-  switch (exact_boxes ? box_pair_contact(a, b, s, margin, out) : 0) {
-    case 1: return out.size() > before;
-    case 2: return false;  // (the pair's other direction found them)
-    default: break;
-  }
   const Pose pose_a = pose_at(a, s);
   const Points& samples = defs_[a].samples;
   // cull in a's mesh frame: only samples within b's bounding sphere (or below the ground
@@ -262,11 +260,11 @@ bool World::samples_inside(int a, int b, double s, double margin, bool exact_box
 // edges are where boxes rest face on face, their axis is ill-conditioned, and the samples
 // hold them (measured: the aligned pile ended with 20 mm of overlap without this bound)
 bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
-  if (b == kGround) return false;
+  if (b == kGround || !defs_[a].box || !defs_[b].box) return false;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
   BoxContact contact;
-  if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b) ||
+  if (!body_box(a, pose_a, box_a) || !body_box(b, pose_b, box_b) ||
       !box_edge_contact(box_a, box_b, margin, contact) || contact.edge_sine < kCrossingSine) {
     return false;
   }
@@ -286,22 +284,22 @@ bool World::box_edge_crossing(int a, int b, double s, double margin, std::vector
 // lie on a's surface, each with its depth along the contact normal; like an edge crossing
 // (see box_edge_crossing) each is carried by both bodies, a's point in a's frame and the
 // matching point of b (depth along the normal) in b's, so that refresh_contact measures the
-// separation of the two along the normal carried by b. The pair is found once, in the
-// direction a < b. Returns 0 when the pair is not two boxes (or they overlap too deep, see
-// below), 1 when it was found here (points appended), 2 when it is left to the other direction
-int World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
-  if (!settings_.box_contacts || b == kGround) return 0;
+// separation of the two along the normal carried by b. The pair is found once, for both
+// directions. False when the pair is not two boxes or they overlap too deep (see below: the
+// samples then, both ways); true when it was found here (its points appended, if any)
+bool World::box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const {
+  if (!settings_.box_contacts || b == kGround || !defs_[a].box || !defs_[b].box) return false;
   const Pose pose_a = pose_at(a, s), pose_b = pose_at(b, s);
   OrientedBox box_a, box_b;
-  if (!oriented_box(defs_[a].shape.get(), pose_a, box_a) || !oriented_box(defs_[b].shape.get(), pose_b, box_b)) return 0;
+  body_box(a, pose_a, box_a);
+  body_box(b, pose_b, box_b);
   // deeper than a quarter of the thinner box the axis of least overlap may be the far side's
   // (a box driven past a wall's middle in one long step would be pushed on through): the
   // samples then, both ways, with their own guard for deep points (see apply_contact_impulse)
   const double trusted = kTrustedDepth * std::min(defs_[a].thickness, defs_[b].thickness);
-  if (a > b) return box_overlap_depth(box_a, box_b) > trusted ? 0 : 2;
   BoxContact contact;
-  if (!box_box_contact(box_a, box_b, margin, contact)) return 1;
-  if (contact.depth > trusted) return 0;
+  if (!box_box_contact(box_a, box_b, margin, contact)) return true;
+  if (contact.depth > trusted) return false;
   const Vec3 normal_b = pose_b.rotation.transpose() * contact.normal;
   for (int k = 0; k < contact.count; ++k) {
     const double depth = contact.points[k].depth;
@@ -312,7 +310,7 @@ int World::box_pair_contact(int a, int b, double s, double margin, std::vector<P
     out.push_back({a, b, candidate_poses_[a].apply(m), contact.normal, -depth, m, s, true,
                    pose_b.apply_inverse(on_a + depth * contact.normal), normal_b});
   }
-  return 1;
+  return true;
 }
 
 // Body i's K at world point x, lever arm from its candidate centre of mass; zero for the
@@ -372,7 +370,7 @@ bool World::apply_collision_impulse(const Penetration& p, double restitution, do
 // deepest: the step cannot tell which came first, and they are struck together. A face landing flat
 // (or an edge) is then hit at its middle, as a square hit must be, not at whichever corner
 // round-off made deepest, which would spin the body and let friction throw it sideways.
-World::Penetration World::struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const {
+Penetration World::struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const {
   // an impact, not settling: slower than 1 m/s, or than gravity adds in two substeps, is a
   // stack settling, the contact stage's to finish; it keeps its single points (with the
   // centroid, the 15-row pyramid at 1/60 s substeps falls)
@@ -418,7 +416,10 @@ void World::resolve_collisions(double dt) {
   // within the sweeps; later sweeps re-test only those (a point farther out than the margin
   // at the first sweep stays outside)
   std::vector<std::vector<Penetration>>& inside = pair_scratch_;
-  find_pair_penetrations(inside, settings_.speculative_contacts);
+  find_pair_penetrations(inside, settings_.speculative_contacts, /*reuse=*/false);
+  // the bodies' versions now: those that change took an impulse (see find_pair_penetrations)
+  std::vector<std::uint64_t>& before = collision_versions_;
+  before.assign(version_.begin(), version_.end());
   // islands of the pairs with samples inside (the others have nothing to do), each swept on
   // its own and in parallel as in resolve_contacts: an island whose sweep applies no impulse
   // revisits no pair after it, so stopping it there gives the bits of the global sweeps
@@ -427,7 +428,7 @@ void World::resolve_collisions(double dt) {
   for (std::size_t k = 0; k < pairs_.size(); ++k) {
     islands.links[k] = inside[k].empty() ? std::array<int, 2>{-1, -1} : std::array<int, 2>{pairs_[k].a, pairs_[k].b};
   }
-  find_islands();
+  find_islands(defs_, islands_);
   // each sweep's order of the island's pairs: all pairs shuffled, then taken island by island
   const int sweeps = settings_.collision_sweeps;
   const int m = islands.item_start[islands.count];
@@ -477,6 +478,8 @@ void World::resolve_collisions(double dt) {
     }
   });
   collect_impulses();
+  collided_.resize(body_count());
+  for (int i = 0; i < body_count(); ++i) collided_[i] = version_[i] != before[i];
 }
 
 // Velocities: gravity on every dynamic body (no torque: it acts at the centre of mass)
@@ -506,7 +509,7 @@ void World::resolve_contacts(double dt) {
   find_contacts();
   islands_.links.resize(contacts_.size());
   for (std::size_t k = 0; k < contacts_.size(); ++k) islands_.links[k] = {contacts_[k].point.a, contacts_[k].point.b};
-  find_islands();
+  find_islands(defs_, islands_);
   const IslandScratch& islands = islands_;
   tbb::parallel_for(0, islands.count, [&](int k) {
     ImpulseLog& log = islands_.logs[k];
@@ -522,129 +525,28 @@ void World::resolve_contacts(double dt) {
   collect_impulses();
 }
 
-// The islands of islands_.links (item k links bodies a and b; a < 0: item k is in no
-// island), numbered in the order of their first item, each with its items in order; their
-// logs start empty
-void World::find_islands() {
-  const int n = body_count();
-  IslandScratch& islands = islands_;
-  const std::vector<std::array<int, 2>>& links = islands.links;
-  std::vector<int>& parent = islands.parent;
-  reset_sets(parent, n);
-  auto root = [&](int i) { return set_root(parent, i); };
-  auto dynamic = [&](int i) { return i >= 0 && !defs_[i].kinematic; };
-  for (const auto& [a, b] : links) {
-    if (dynamic(a) && dynamic(b)) parent[root(a)] = root(b);
-  }
-  // each item's island is that of its dynamic body (a pair or contact has one at least)
-  std::vector<int>& index = islands.index;
-  std::vector<int>& of_item = islands.of_item;
-  index.assign(n, -1);
-  of_item.resize(links.size());
-  islands.count = 0;
-  for (std::size_t k = 0; k < links.size(); ++k) {
-    const auto& [a, b] = links[k];
-    of_item[k] = -1;
-    if (a < 0) continue;
-    const int r = root(dynamic(a) ? a : b);
-    if (index[r] < 0) index[r] = islands.count++;
-    of_item[k] = index[r];
-  }
-  std::vector<int>& of_body = islands.of_body;
-  of_body.resize(n);
-  for (int i = 0; i < n; ++i) of_body[i] = index[root(i)];
-  // items by island (a counting sort keeps their order)
-  std::vector<int>& start = islands.item_start;
-  start.assign(islands.count + 1, 0);
-  for (int island : of_item) {
-    if (island >= 0) ++start[island + 1];
-  }
-  std::partial_sum(start.begin(), start.end(), start.begin());
-  std::vector<int>& filled = islands.filled;
-  filled.assign(start.begin(), start.end() - 1);
-  islands.items.resize(start.back());
-  for (std::size_t k = 0; k < links.size(); ++k) {
-    if (of_item[k] >= 0) islands.items[filled[of_item[k]]++] = static_cast<int>(k);
-  }
-  if (static_cast<int>(islands.logs.size()) < islands.count) islands.logs.resize(islands.count);
-  for (int k = 0; k < islands.count; ++k) {
-    islands.logs[k].stale.clear();
-    islands.logs[k].impulses = 0;
-  }
-}
 
-// Keeps at most four of a group of penetrating points that push the same way: the deepest,
-// the one farthest from it, the one that spans the largest triangle with those two, and the
-// one farthest outside that triangle. A rigid body's velocity is linear in position, so if
-// these points stop approaching so does every point of the flat contact they span; for a
-// face on a face this replaces ~16 points by 4 for the same answer. Deterministic: ties go
-// to the earlier point. `points` is sorted deepest first.
-void World::reduce_to_four(std::vector<Penetration>& points) {
-  const std::size_t count = points.size();
-  if (count <= 4) return;
-  std::size_t keep[4] = {0, 0, 0, 0};
-  for (std::size_t round = 1; round < 4; ++round) {
-    const Vec3 &p0 = points[keep[0]].x, &p1 = points[keep[1]].x, &p2 = points[keep[2]].x;
-    const Vec3 normal = (p1 - p0).cross(p2 - p0);
-    double best = -1.0;
-    for (std::size_t k = 0; k < count; ++k) {
-      const Vec3& x = points[k].x;
-      double score;
-      if (round == 1) {
-        score = (x - p0).squaredNorm();
-      } else if (round == 2) {
-        score = (p1 - p0).cross(x - p0).squaredNorm();
-      } else {  // outside the triangle: the largest of its distances beyond the three edges
-        score = 0.0;
-        for (const auto& [from, to] : {std::pair{p0, p1}, std::pair{p1, p2}, std::pair{p2, p0}}) {
-          const Vec3 c = (to - from).cross(x - from);
-          if (c.dot(normal) < 0.0) score = std::max(score, c.squaredNorm());
-        }
-      }
-      if (score > best) {
-        best = score;
-        keep[round] = k;
-      }
-    }
-  }
-  std::vector<Penetration> kept;
-  for (std::size_t round = 0; round < 4; ++round) {
-    if (std::find(keep, keep + round, keep[round]) == keep + round) kept.push_back(points[keep[round]]);
-  }
-  points.swap(kept);
-}
 
-// Reduces the points of one pair and direction (deepest first) group by group: a group is
-// every remaining point whose normal is within ~25 degrees of the deepest remaining one's,
-// so points that push different ways (an edge caught on a side face, the two arms of a
-// torus on a post) keep their own representatives
-void World::reduce_contact_points(std::vector<Penetration>& points) {
-  std::vector<Penetration> rest, result, group, others;
-  rest.swap(points);
-  while (!rest.empty()) {
-    group.clear();
-    others.clear();
-    const Vec3 n0 = rest.front().n;
-    for (const Penetration& p : rest) (p.n.dot(n0) > 0.9 ? group : others).push_back(p);
-    reduce_to_four(group);
-    result.insert(result.end(), group.begin(), group.end());
-    rest.swap(others);
-  }
-  points.swap(result);
-}
-
-bool World::deeper(const Penetration& l, const Penetration& r) { return l.phi < r.phi; }
-
-// Every pair's penetrating samples, both directions (pair order, then sample order). Pairs
-// are independent and read-only here, so they run in parallel; each writes only its own list,
-// so the result is the same for any number of threads.
-void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative) const {
+// Every pair's penetrating samples, both directions (pair order, then sample order); two boxes
+// by their exact contact, once for the pair. Pairs are independent and read-only here, so they
+// run in parallel; each writes only its own list, so the result is the same for any number of
+// threads. With reuse (the contact stage), a pair whose bodies took no collision impulse keeps
+// the list the collision stage found: its candidates are the same, bit for bit (x + dt (v + dt
+// g) either way, the same rotation), and so are its margin (see contact_margin) and its one
+// test; the narrow phase then runs once per step for most of a resting pile
+void World::find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative, bool reuse) {
   out.resize(pairs_.size());
+  single_test_.resize(pairs_.size());
   tbb::parallel_for(std::size_t(0), pairs_.size(), [&](std::size_t k) {
+    const int a = pairs_[k].a, b = pairs_[k].b;
+    if (reuse && single_test_[k] && !collided_[a] && (b == kGround || !collided_[b])) return;
     out[k].clear();
-    const double margin = speculative ? contact_margin(pairs_[k].a, pairs_[k].b) : 0.0;
-    find_penetrations(pairs_[k].a, pairs_[k].b, margin, out[k]);
-    if (pairs_[k].b != kGround) find_penetrations(pairs_[k].b, pairs_[k].a, margin, out[k]);
+    const double margin = speculative ? contact_margin(a, b) : 0.0;
+    const long long tests = sweep_tests(a, b);  // (the same both ways)
+    single_test_[k] = tests == 1;
+    if (tests == 1 && box_pair_contact(a, b, 1.0, margin, out[k])) return;
+    find_penetrations(a, b, margin, tests, out[k]);
+    if (b != kGround) find_penetrations(b, a, margin, tests, out[k]);
   });
 }
 
@@ -671,7 +573,7 @@ double World::contact_margin(int a, int b) const {
   double cap = std::numeric_limits<double>::infinity();
   for (int i : {a, b}) {
     if (i == kGround) continue;
-    margin += 0.5 * dt_ * states_[i].v.norm();
+    margin += 0.5 * dt_ * candidates_[i].v.norm();  // (the velocity over the step, gravity in)
     cap = std::min(cap, kTrustedDepth * defs_[i].thickness);
   }
   for (int i : {a, b}) {
@@ -683,7 +585,7 @@ double World::contact_margin(int a, int b) const {
 void World::find_contacts() {
   // per pair: each direction deepest first and reduced, then the pair's points deepest first
   std::vector<std::vector<Penetration>>& found = pair_scratch_;
-  find_pair_penetrations(found, settings_.speculative_contacts);
+  find_pair_penetrations(found, settings_.speculative_contacts, /*reuse=*/true);
   tbb::parallel_for(std::size_t(0), found.size(), [&](std::size_t k) {
     std::vector<Penetration>& points = found[k];
     const auto split = std::stable_partition(points.begin(), points.end(),
@@ -763,7 +665,7 @@ bool World::apply_contact_impulse(ContactPoint& contact, ImpulseLog& log) {
   }
   const Vec3 total = contact_impulse_update(K, p.n, v, contact.total, contact.friction, target);
   const Vec3 change = total - contact.total;
-  if ((K * change).norm() <= settings_.contact_tolerance) {
+  if ((K * change).squaredNorm() <= settings_.contact_tolerance * settings_.contact_tolerance) {
     contact.seen_a = va;
     contact.seen_b = vb;
     return false;

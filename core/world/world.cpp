@@ -61,6 +61,7 @@ int World::add_body(const BodyDesc& desc) {
   def.friction = desc.friction;
   def.restitution = desc.restitution;
   def.shape = desc.shape;
+  def.box = dynamic_cast<const BoxDistance*>(def.shape.get());
   def.samples = desc.samples;
   def.sample_blocks = sample_blocks(def.samples);
   def.center = desc.unit_mass.center;
@@ -75,6 +76,12 @@ int World::add_body(const BodyDesc& desc) {
     def.inverse_mass = 1.0 / desc.mass;
     def.inertia = density * eigen.eigenvalues();
     require(def.inertia.minCoeff() > 0.0, "body inertia must be positive (a flat shape?)");
+    // equal moments to round-off (a cube, a sphere): exactly equal, and the rotation exact
+    if (def.inertia.maxCoeff() - def.inertia.minCoeff() <= 1e-12 * def.inertia.maxCoeff()) {
+      def.inertia.setConstant(def.inertia.mean());
+      def.isotropic = true;
+      def.mesh_axes = Mat3::Identity();  // (every frame is principal: the mesh's own)
+    }
     def.inverse_inertia = def.inertia.cwiseInverse();
   }
   for (Eigen::Index s = 0; s < def.samples.rows(); ++s) {
@@ -161,14 +168,17 @@ World::FrameSchedule World::frame_schedule(double frame_dt) const {
   // while any body may bounce (an awake dynamic body, some restitution above 0) the ceiling
   // is bounce_substep; inelastic piles, where speculative and exact box contacts hold at the
   // longer max_substep, are not held back by it
-  const bool dynamic = std::any_of(defs_.begin(), defs_.end(), [](const RigidBodyDef& d) { return !d.kinematic; });
-  bool awake = false, restitution = ground_ && ground_->restitution > 0.0;
+  // Every dynamic body asleep, no kinematic body moving and no cloth: nothing can happen before
+  // the frame ends, and the bodies take the frame in one step (it costs nothing: see step_bodies)
+  bool dynamic = false, awake = false, moving = false, restitution = ground_ && ground_->restitution > 0.0;
   for (int i = 0; i < body_count(); ++i) {
+    dynamic = dynamic || !defs_[i].kinematic;
     awake = awake || (!defs_[i].kinematic && !asleep_[i]);
+    moving = moving || moving_kinematic(i) || !tracks_[i].empty();
     restitution = restitution || defs_[i].restitution > 0.0;
   }
   const double ceiling = awake && restitution ? std::min(settings_.max_substep, settings_.bounce_substep) : settings_.max_substep;
-  const double rigid = bounded(std::max(dynamic ? std::ceil(frame_dt / ceiling) : 1.0, travel));
+  const double rigid = bounded(std::max(awake || (dynamic && (moving || !cloths_.empty())) ? std::ceil(frame_dt / ceiling) : 1.0, travel));
   if (cloths_.empty()) return {static_cast<int>(rigid), 1};
 
   // cloths: their own ceiling; bodies (a keyed collider, say) crossing no more of themselves
@@ -286,7 +296,20 @@ void World::step(double dt) {
 
 void World::step_bodies(double dt) {
   dt_ = dt;
-  { ScopedTimer timer(profile_.broad_phase); move_kinematic_bodies(dt); broad_phase(dt); }
+  { ScopedTimer timer(profile_.broad_phase); move_kinematic_bodies(dt); }
+  // every dynamic body asleep and no kinematic body moving: no pair, no contact, nothing moves
+  bool quiet = true;
+  for (int i = 0; i < body_count() && quiet; ++i) {
+    quiet = defs_[i].kinematic ? !moving_kinematic(i) : asleep_[i] != 0;
+  }
+  if (quiet) {
+    pairs_.clear();
+    contacts_.clear();
+    time_ += dt;
+    ++stats_.substeps;
+    return;
+  }
+  { ScopedTimer timer(profile_.broad_phase); broad_phase(dt); }
   { ScopedTimer timer(profile_.collisions); resolve_collisions(dt); }
   { ScopedTimer timer(profile_.velocities); update_velocities(dt); }
   { ScopedTimer timer(profile_.contacts); resolve_contacts(dt); }
@@ -354,8 +377,8 @@ double World::pair_penetration(const BodyPair& pair) const {
   // can exceed (moving a point at depth d out of a convex body takes a translation >= d)
   OrientedBox box_a, box_b;
   const bool boxes = pair.b != kGround &&
-                     oriented_box(defs_[pair.a].shape.get(), mesh_pose(defs_[pair.a], states_[pair.a]), box_a) &&
-                     oriented_box(defs_[pair.b].shape.get(), mesh_pose(defs_[pair.b], states_[pair.b]), box_b);
+                     body_box(pair.a, mesh_pose(defs_[pair.a], states_[pair.a]), box_a) &&
+                     body_box(pair.b, mesh_pose(defs_[pair.b], states_[pair.b]), box_b);
   if (boxes) return box_overlap_depth(box_a, box_b);
   double deepest = 0.0;
   for (const auto& [a, b] : {std::pair{pair.a, pair.b}, std::pair{pair.b, pair.a}}) {

@@ -27,6 +27,10 @@
 #include "cloth/self_collision.h"
 #include "contact/body_features.h"
 #include "geometry/mass_properties.h"
+#include "rigid/box_contact.h"
+#include "rigid/contact_points.h"
+#include "rigid/islands.h"
+#include "rigid/overlapping_pairs.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
@@ -40,8 +44,11 @@ namespace simbake {
 struct WorldSettings {
   Vec3 gravity = Vec3(0.0, -9.81, 0.0);  // (m/s^2)
   int collision_sweeps = 5;              // elastic sweeps over all pairs (the notes: 3-5)
-  int contact_sweeps = 10;               // inelastic sweeps over all pairs (at most)
-  int shock_sweeps = 20;                 // sweeps per level of shock propagation (at most)
+  int contact_sweeps = 6;                // inelastic sweeps over all pairs (at most; was 10)
+  int shock_sweeps = 10;                 // sweeps per level of shock propagation (at most; was
+                                         // 20). Fewer: the 1000-box piles 1.2x faster and no
+                                         // deeper; the tower of 10 drifts 1.3 mm, not 0.4
+                                         // (benchmarks/results/rigid_speed.md)
   double sleep_speed = 0.01;             // (m/s) a body whose points stray less than
   double sleep_time = 0.5;               // (s) sleep_speed * sleep_time / 2 for sleep_time
                                          // may sleep; sleep_time 0 disables sleeping
@@ -180,24 +187,6 @@ class World {
   static constexpr int kGround = -1;
   static constexpr double kTouching = 1e-9;  // (m) closer than this to a surface is touching
 
-  // A sample point of body `a` found inside body `b` (or the ground) at the candidates
-  struct Penetration {
-    int a, b;
-    Vec3 x;      // world position of the sample (m)
-    Vec3 n;      // unit normal of b's level set at x, world, pointing towards a
-    double phi;  // b's signed distance at x (m), negative
-    Vec3 local;  // the point in a's mesh frame: a surface sample, or the deepest point of a
-                 // box's edge crossing another box's edge (see box_edge_crossing)
-    double s = 1.0;  // fraction of the step at which x, n and phi were taken (1: the candidates;
-                     // less for a fast pair, see sweep_tests); x is then where the sample is
-                     // at the candidates, so that lever arms are from the candidate centres
-    // an edge crossing an edge (see box_edge_crossing): the point of b's edge nearest a's,
-    // in b's mesh frame, and the normal in b's frame; phi is then the separation of the two
-    // points along the normal, not b's level set
-    bool crossing = false;
-    Vec3 local_b = Vec3::Zero();
-    Vec3 normal_b = Vec3::Zero();
-  };
   // A contact point of the contact stage, found when the stage begins
   struct ContactPoint {
     Penetration point;
@@ -215,32 +204,6 @@ class World {
     int a, b;  // b may be kGround
     double friction, restitution;  // combined (see combine_materials in world.cpp)
   };
-  // What impulses leave behind, per island (or per serial stage): the bodies whose
-  // candidates are stale, and how many impulses were applied
-  struct ImpulseLog {
-    std::vector<int> stale;
-    long long impulses = 0;
-  };
-  // The islands of an impulse stage (see resolve_contacts), rebuilt by each stage from its
-  // items: the pairs with samples inside (collisions) or the contacts
-  struct IslandScratch {
-    int count = 0;
-    std::vector<std::array<int, 2>> links;    // (nitem) bodies of each item; -1: in no island
-    std::vector<int> parent;                  // (nbody) union-find through the links
-    std::vector<int> index;                   // (nbody) island of a root body, else -1
-    std::vector<int> of_body;                 // (nbody) island of each body, -1 when unlinked
-    std::vector<int> of_item;                 // (nitem) island of each item, or -1
-    std::vector<int> item_start;              // (count + 1) island k's items are
-    std::vector<int> items;                   //   items[item_start[k] .. item_start[k + 1])
-    std::vector<int> filled;                  // (count) counting-sort cursors
-    std::vector<int> order;                   // (npair) collisions: a sweep's shuffled pairs
-    std::vector<int> by_sweep;                // (sweeps x nitem) collisions: island k's pairs
-                                              //   in sweep s at s nitem + item_start[k] ..
-    std::vector<int> body_start;              // (count + 1) island k's bodies with a level,
-    std::vector<int> bodies;                  //   by level, likewise (shock propagation)
-    std::vector<std::vector<int>> by_level;   // (count) island k's contacts by level
-    std::vector<ImpulseLog> logs;             // (count)
-  };
   // per-step scratch of shock propagation, kept so that a step allocates nothing
   struct ShockScratch {
     std::vector<Vec3> v_before, l_before;     // (nbody) velocities before the levels
@@ -252,15 +215,6 @@ class World {
                                               // not connected to the ground or a kinematic body
     std::vector<int> group;                   // (nbody) union-find of contact groups
     std::vector<char> thrown;                 // (nbody) group roots thrown off by the levels
-  };
-  // scratch of the broad phase's grid (see overlapping_pairs)
-  struct GridScratch {
-    std::vector<double> sides;                  // largest side of each finite box (m)
-    std::vector<std::array<long long, 6>> ranges;  // (nbody) cells a box covers, lower and
-                                                // upper (x, y, z); lower x -1 for a large box
-    std::vector<int> large;                     // boxes tested against every other box
-    std::vector<int> cell_start;                // (ncell + 1) cell c holds
-    std::vector<int> members;                   // members[cell_start[c] .. cell_start[c + 1])
   };
   // one substep of the rigid bodies (every stage but step_cloths)
   void step_bodies(double dt);
@@ -289,7 +243,6 @@ class World {
   bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
   bool moving_kinematic(int i) const;
   void compute_boxes(double dt);
-  void overlapping_pairs(std::vector<std::pair<int, int>>& out);
   bool touching(int mover, int sleeper, double dt) const;
   void collide_cloth(int c, double dt);
   Vec3 surface_velocity(int b, const Vec3& p) const;
@@ -307,26 +260,28 @@ class World {
   void mark_stale(int i, ImpulseLog& log);
   void refresh_stale_candidates(ImpulseLog& log);
   Vec3 point_velocity(int i, const Vec3& x) const;
-  void find_penetrations(int a, int b, double margin, std::vector<Penetration>& out) const;
+  void find_penetrations(int a, int b, double margin, long long tests, std::vector<Penetration>& out) const;
   double contact_margin(int a, int b) const;
   long long sweep_tests(int a, int b) const;
   Pose pose_at(int i, double s) const;
-  bool samples_inside(int a, int b, double s, double margin, bool exact_boxes, std::vector<Penetration>& out) const;
+  bool samples_inside(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
   bool box_edge_crossing(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
-  int box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  bool box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  // body i as an oriented box at the pose, when its shape is a box
+  bool body_box(int i, const Pose& pose, OrientedBox& out) const {
+    if (defs_[i].box == nullptr) return false;
+    out = {pose.translation, pose.rotation, defs_[i].box->half()};
+    return true;
+  }
   Mat3 body_impulse_matrix(int i, const Vec3& x) const;
   Mat3 pair_impulse_matrix(const Penetration& p) const;
   void exchange_impulse(const Penetration& p, const Vec3& J, ImpulseLog& log);
   bool apply_collision_impulse(const Penetration& p, double restitution, double friction, ImpulseLog& log);
   Penetration struck_point(const std::vector<Penetration>& found, const Penetration& deepest) const;
-  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative) const;
+  void find_pair_penetrations(std::vector<std::vector<Penetration>>& out, bool speculative, bool reuse);
   void find_contacts();
-  static void reduce_to_four(std::vector<Penetration>& points);
-  static void reduce_contact_points(std::vector<Penetration>& points);
-  static bool deeper(const Penetration& l, const Penetration& r);
   void refresh_contact(Penetration& p) const;
   bool apply_contact_impulse(ContactPoint& contact, ImpulseLog& log);
-  void find_islands();
   void collect_impulses();
   void assign_contact_levels();
   bool check_finite() const;
@@ -379,6 +334,9 @@ class World {
   ImpulseLog log_;                          // the serial stages' impulses
   GridScratch grid_;                        // reused by overlapping_pairs
   std::vector<std::vector<Penetration>> pair_scratch_;  // (npair) samples inside, collision stage
+  std::vector<char> single_test_;           // (npair) the collision stage tested the pair once
+  std::vector<std::uint64_t> collision_versions_;  // (nbody) versions when the collision sweeps began
+  std::vector<char> collided_;              // (nbody) took a collision impulse this step
   double dt_ = 0.0;                         // current substep (s)
   double time_ = 0.0;                       // simulated time at the start of the step (s)
   bool candidates_with_forces_ = false;     // collision stage: candidates include gravity
