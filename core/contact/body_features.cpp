@@ -159,13 +159,15 @@ long long TriangleGrid::key(const Vec3& p) const {
   return k;
 }
 
-void TriangleGrid::build(const Points& x, const Triangles& triangles, double cell, double margin) {
+void TriangleGrid::build(const Points& x, const Triangles& triangles, double cell, double margin,
+                         const Box3& region) {
   cell_ = cell;
   entries_.clear();
   for (int t = 0; t < triangles.rows(); ++t) {
     Box3 box;
     for (int v = 0; v < 3; ++v) box.extend(Vec3(x.row(triangles(t, v)).transpose()));
     const Vec3 lo = box.min().array() - margin, hi = box.max().array() + margin;
+    if (!Box3(lo, hi).intersects(region)) continue;
     for (double gx = std::floor(lo.x() / cell) * cell; gx <= hi.x(); gx += cell) {
       for (double gy = std::floor(lo.y() / cell) * cell; gy <= hi.y(); gy += cell) {
         for (double gz = std::floor(lo.z() / cell) * cell; gz <= hi.z(); gz += cell) {

@@ -47,6 +47,7 @@ void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& poin
 struct BodyFeatures {
   std::vector<Vec3> points;   // (nfeature) on the body's surface (m)
   std::vector<Vec3> normals;  // (nfeature) the normalized sum of the normals of the faces there
+  Box3 bounds;                // of the points (m)
   std::vector<double> inside_below;  // (nfeature) a point behind the feature is inside the body where the
                                      // body's phi is below this (m): 0, or the level set's own phi at the
                                      // feature where it rounds a sharp edge (see World::collide_features)
@@ -77,7 +78,8 @@ bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, cons
 // a point. Entries are sorted by (cell, triangle), so queries list triangles in index order.
 class TriangleGrid {
  public:
-  void build(const Points& x, const Triangles& triangles, double cell, double margin);
+  // the triangles (at positions x) whose box grown by `margin` meets `region`
+  void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region);
   // the triangles whose grown box's cells include p's cell, in increasing order
   void query(const Vec3& p, std::vector<int>& out) const;
 

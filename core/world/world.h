@@ -296,7 +296,7 @@ class World {
   void collide_cloth(int c, double dt);
   // a body's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
   template <class Contact>
-  bool collide_features(int c, int b, double dt, bool& grid_built, const Contact& contact);
+  bool collide_features(int c, int b, double dt, const Contact& contact);
   // body b's features against cloth c (spaced for its edges), made at the first call
   const BodyFeatures& body_features(int c, int b);
   void hold_pinched_bodies(int c, double dt);
