@@ -15,8 +15,9 @@
 // out to h, the change shared by the three vertices by weight and inverse mass, friction,
 // the opposite momentum to the body). A plane behind the feature (phi < 0) counts only when
 // the triangle's point there lies inside the body (the feature pierced it); otherwise it is
-// a layer on the body's far side, which the feature never reached (the caller checks). Bridson, Fedkiw and Anderson 2002 treat body
-// features against cloth triangles the same way as cloth points against body surfaces.
+// a layer on the body's far side, which the feature never reached (the caller checks).
+// Bridson, Fedkiw and Anderson 2002 treat body features against cloth triangles the same way
+// as cloth points against body surfaces.
 //
 // The features of a body are a list of points and normals in its own coordinates, made once
 // per (body, cloth): a box's edges exactly (box_edge_features), a mesh's sharp convex edges
