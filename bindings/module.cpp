@@ -5,6 +5,7 @@
 // trusts its callers): a bad index is IndexError, a bad number ValueError, never a crash.
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include <pybind11/eigen.h>
@@ -225,10 +226,19 @@ PYBIND11_MODULE(_core, m) {
       .def("add_body", [](World& w, const LevelSet* shape, const Points& samples, const py::dict& mass_properties,
                           double mass, const Vec3& origin, const Eigen::Vector4d& orientation,
                           const Vec3& linear_velocity, const Vec3& angular_velocity, double friction,
-                          double restitution, bool kinematic) {
+                          double restitution, bool kinematic, const std::optional<Points>& mesh_vertices,
+                          const std::optional<Triangles>& mesh_triangles) {
              BodyDesc d;
              if (shape) d.shape = shape->distance;
              d.samples = samples;
+             if (mesh_vertices.has_value() != mesh_triangles.has_value()) {
+               throw std::invalid_argument("give both mesh_vertices and mesh_triangles, or neither");
+             }
+             if (mesh_vertices) {
+               to_mesh(*mesh_vertices, *mesh_triangles);
+               d.mesh_vertices = *mesh_vertices;
+               d.mesh_triangles = *mesh_triangles;
+             }
              d.unit_mass = mass_from_dict(mass_properties);
              d.mass = mass;
              d.origin = origin;
@@ -243,7 +253,10 @@ PYBIND11_MODULE(_core, m) {
            py::arg("shape"), py::arg("samples"), py::arg("mass_properties"), py::arg("mass"),
            py::arg("origin"), py::arg("orientation"), py::arg("linear_velocity") = Vec3::Zero(),
            py::arg("angular_velocity") = Vec3::Zero(), py::arg("friction") = 0.5,
-           py::arg("restitution") = 0.0, py::arg("kinematic") = false)
+           py::arg("restitution") = 0.0, py::arg("kinematic") = false,
+           py::arg("mesh_vertices") = py::none(), py::arg("mesh_triangles") = py::none(),
+           "mesh_vertices (n, 3) and mesh_triangles (m, 3): the closed mesh a baked level-set shape was "
+           "made from, whose sharp edges and corners are then held out of cloth triangles")
       .def("add_cloth", [](World& w, const Points& rest, const Triangles& triangles, double area_density,
                            const std::string& model, double stretch_stiffness, double poisson_ratio,
                            double bend_stiffness, double damping, double strain_limit, const std::string& compression,

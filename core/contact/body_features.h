@@ -1,4 +1,4 @@
-// A body's sharp features (a box's corners and edges) against a cloth's triangles.
+// A body's sharp features (a box's or a mesh's corners and edges) against a cloth's triangles.
 //
 // The cloth's contacts with a body hold its vertices and edge points out of the body's level
 // set; they cannot stop a body's corner or edge from poking through the inside of a cloth
@@ -15,8 +15,23 @@
 // out to h, the change shared by the three vertices by weight and inverse mass, friction,
 // the opposite momentum to the body). A plane behind the feature (phi < 0) counts only when
 // the triangle's point there lies inside the body (the feature pierced it); otherwise it is
-// a layer on the body's far side, which the feature never reached (the caller checks). Bridson, Fedkiw and Anderson 2002 treat body
-// features against cloth triangles the same way as cloth points against body surfaces.
+// a layer on the body's far side, which the feature never reached (the caller checks).
+// Bridson, Fedkiw and Anderson 2002 treat body features against cloth triangles the same way
+// as cloth points against body surfaces.
+//
+// The features of a body are a list of points and normals in its own coordinates, made once
+// per (body, cloth): a box's edges exactly (box_edge_features), a mesh's sharp convex edges
+// and its corners (mesh_edge_features). Which of a mesh's edges are sharp depends on the
+// cloth: a cloth triangle straddling a crease of exterior angle theta (the angle between
+// the two faces' normals), its corners s from the crease and held h off both faces by the
+// cloth's contacts, clears the crease's line by
+//     h cos(theta / 2) - s sin(theta / 2),
+// so it stays clear while tan(theta / 2) < h / s. s reaches the cloth's mean edge L, more
+// under strain, and the level set's rounding of the crease (a fraction of a voxel) takes part
+// of h, hence a factor 2 of margin: a crease is sharp past
+//     theta_s = 2 atan(h / (2 L)),   and at most 30 degrees,
+// (cloth_demo: h = 5 mm, L = 5 cm, theta_s = 5.7 degrees: every edge of its torus, whose
+// faces meet at 11.25 and 22.5 degrees, is a feature).
 #pragma once
 
 #include "math/types.h"
@@ -29,6 +44,31 @@ namespace simbake {
 // included, once each), at most `spacing` apart, and their outward normals
 void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& points, std::vector<Vec3>& normals);
 
+// Points and their outward unit normals, in the body's coordinates (m)
+struct BodyFeatures {
+  std::vector<Vec3> points;   // (nfeature) on the body's surface (m)
+  std::vector<Vec3> normals;  // (nfeature) the normalized sum of the normals of the faces there
+  Box3 bounds;                // of the points (m)
+  std::vector<double> inside_below;  // (nfeature) a point behind the feature is inside the body where the
+                                     // body's phi is below this (m): 0, or the level set's own phi at the
+                                     // feature where it rounds a sharp edge (see World::collide_features)
+};
+
+// The exterior angle (rad) past which a mesh's crease is a feature for a cloth of thickness
+// h and mean edge L (the derivation is at the top of this file)
+double sharp_crease_angle(double thickness, double mean_edge);
+
+// A closed mesh's features: points at most `spacing` apart along every convex edge whose
+// faces meet at more than `sharp_angle` (rad) and every boundary edge, each with the
+// normalized sum of its faces' normals; then the corners, once each, in vertex order: the
+// ends of those edges, and any vertex whose faces all turn away (a positive angle deficit)
+// with one of them more than sharp_angle / 2 from the vertex's normal (a cone's tip among
+// shallow creases), each with its angle-weighted normal (the sum of its faces' normals
+// weighted by their angles there: (1, 1, 1) / sqrt(3) at a cube's corner however its faces
+// are split)
+void mesh_edge_features(const Points& vertices, const Triangles& triangles, double spacing, double sharp_angle,
+                        std::vector<Vec3>& points, std::vector<Vec3>& normals);
+
 // A feature f (outward normal nf) against triangle (a, b, c): true when f's projection lies
 // inside the triangle and the plane is within (-band, h) ahead of f; then the barycentric
 // weights w, the normal n_t (turned towards nf) and the distance phi
@@ -39,7 +79,8 @@ bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, cons
 // a point. Entries are sorted by (cell, triangle), so queries list triangles in index order.
 class TriangleGrid {
  public:
-  void build(const Points& x, const Triangles& triangles, double cell, double margin);
+  // the triangles (at positions x) whose box grown by `margin` meets `region`
+  void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region);
   // the triangles whose grown box's cells include p's cell, in increasing order
   void query(const Vec3& p, std::vector<int>& out) const;
 

@@ -55,6 +55,9 @@ int World::add_body(const BodyDesc& desc) {
           "body pose and velocities must be finite");
   require(desc.friction >= 0.0 && std::isfinite(desc.friction), "body friction must be >= 0");
   require(desc.restitution >= 0.0 && desc.restitution <= 1.0, "body restitution must be in [0, 1]");
+  require(desc.mesh_vertices.allFinite() && (desc.mesh_triangles.rows() == 0 ||
+              (desc.mesh_triangles.minCoeff() >= 0 && desc.mesh_triangles.maxCoeff() < desc.mesh_vertices.rows())),
+          "body mesh triangles must index its finite vertices");
 
   RigidBodyDef def;
   def.kinematic = desc.kinematic;
@@ -121,6 +124,7 @@ int World::add_body(const BodyDesc& desc) {
   rest_time_.push_back(0.0);
   rest_pose_.push_back(state);
   island_.push_back(body_count() - 1);
+  body_meshes_.push_back({desc.mesh_vertices, desc.mesh_triangles});
   return body_count() - 1;
 }
 

@@ -27,6 +27,7 @@
 #include "cloth/self_collision.h"
 #include "contact/body_features.h"
 #include "geometry/mass_properties.h"
+#include "geometry/mesh.h"
 #include "rigid/box_contact.h"
 #include "rigid/contact_points.h"
 #include "rigid/islands.h"
@@ -94,6 +95,10 @@ struct BodyDesc {
   SignedDistancePtr shape;          // in mesh coordinates; may be null when no other body
                                     // can touch this one (its samples still meet the ground)
   Points samples;                   // (s x 3) surface samples, mesh coordinates (m)
+  Points mesh_vertices;             // (n x 3) the closed mesh whose level set `shape` is, mesh
+  Triangles mesh_triangles;         // coordinates (m), and its (m x 3) triangles: its sharp edges and
+                                    // corners are held out of cloth triangles. Empty for analytic
+                                    // shapes (a box's edges come from the box itself)
   MassProperties unit_mass;         // of the shape at density 1, mesh coordinates
   double mass = 1.0;                // (kg); ignored for kinematic bodies
   Vec3 origin = Vec3::Zero();       // world position of the mesh origin (m)
@@ -248,9 +253,11 @@ class World {
   Vec3 surface_velocity(int b, const Vec3& p) const;
   void contact_constraints(int c, double dt, std::vector<ClothContactConstraint>& out);
   void apply_constraint_impulses(int c, const std::vector<ClothContactConstraint>& constraints);
-  // a box's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
+  // a body's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
   template <class Contact>
-  bool collide_features(int c, int b, double dt, bool& grid_built, const Contact& contact);
+  bool collide_features(int c, int b, double dt, const Contact& contact);
+  // body b's features against cloth c (spaced for its edges), made at the first call
+  const BodyFeatures& body_features(int c, int b);
   void hold_pinched_bodies(int c, double dt);
   double cloth_penetration() const;
   int find_island(int i);
@@ -326,6 +333,8 @@ class World {
     std::vector<int> constrained_body;  // (constraints) scratch: each constraint's body
   };
   std::vector<ClothTouches> cloth_touches_;               // (ncloth)
+  std::vector<TriangleMesh> body_meshes_;   // (nbody) the mesh of a level-set body (BodyDesc), else empty
+  std::vector<std::vector<std::optional<BodyFeatures>>> cloth_body_features_;  // (ncloth) (nbody) made at first use
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages

@@ -58,11 +58,14 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
     for index, (body, asset) in enumerate(zip(scene.bodies, assets)):
         volume = asset.mass_properties["volume"]
         mass = body.mass if body.mass is not None else body.density * volume
+        # a mesh body's level set comes with its mesh: its sharp edges are held out of cloth
+        mesh = ({"mesh_vertices": asset.vertices, "mesh_triangles": asset.triangles}
+                if body.shape.kind == "mesh" and asset.level_set is not None else {})
         try:
             world.add_body(asset.level_set, asset.samples, _mass_properties(body, asset, mass), mass,
                            np.array(body.position), np.array(body.orientation),
                            np.array(body.linear_velocity), np.array(body.angular_velocity),
-                           body.friction, body.restitution, body.kinematic)
+                           body.friction, body.restitution, body.kinematic, **mesh)
         except ValueError as error:
             raise SceneError(scene.source, f"bodies[{index}]", str(error)) from None
         if body.keys:

@@ -133,3 +133,16 @@ def test_random_arguments_never_crash():
         except (IndexError, ValueError, TypeError) as error:
             outcomes.add(type(error).__name__)
     assert {"ok", "IndexError", "ValueError", "TypeError"} <= outcomes
+
+
+def test_body_mesh_is_checked():
+    """A body's mesh (for its sharp edges against cloth) comes whole: both arrays, indices in range."""
+    size = np.array([1.0, 1.0, 1.0])
+    vertices, triangles = _core.box_mesh(size, 1)
+    args = (_core.LevelSet.box(size), vertices, _core.box_mass_properties(size), 1.0, np.zeros(3),
+            np.array([1.0, 0.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="mesh_vertices and mesh_triangles"):
+        _core.World().add_body(*args, mesh_vertices=vertices)
+    with pytest.raises(ValueError):
+        _core.World().add_body(*args, mesh_vertices=vertices, mesh_triangles=triangles + len(vertices))
+    assert _core.World().add_body(*args, mesh_vertices=vertices, mesh_triangles=triangles) == 0

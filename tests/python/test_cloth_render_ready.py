@@ -54,9 +54,7 @@ DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
 # (scene, check) pairs that fail today, each a limitation in the README: the test then
 # reports them as an expected failure (with the frames and figures) instead of passing;
 # layers through layers are never excused
-# cloth_demo's ring: a mesh body's edges are not yet held out of the cloth's triangles (only a
-# box's are, core/contact/body_features); its edges pass through a cloth triangle at a few frames
-KNOWN_GAPS: set = {("cloth_demo", "mesh_through")}
+KNOWN_GAPS: set = set()
 
 
 def mesh_edges(triangles: np.ndarray) -> np.ndarray:
