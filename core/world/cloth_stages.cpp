@@ -94,7 +94,7 @@ void World::step_cloths(double dt) {
     };
     {
       std::vector<ClothContactConstraint> constraints;
-      if (settings_.cloth_contacts_in_solve) contact_constraints(c, dt, constraints);
+      if (settings_.cloth_contacts_in_solve) contact_constraints(c, constraints);
       {
         ScopedTimer timer(profile_.cloth_forces);
         cloth.update_velocities(dt, settings_.gravity, &constraints);
@@ -258,86 +258,39 @@ bool World::still_surface(int b) const { return b < 0 || (defs_[b].kinematic && 
 //   surface pushed), unless the surface had to pull then: its velocity along the contacts'
 //   mean normal becomes the surface's; if friction stopped its slip (and the solve's hold
 //   needed no more than the friction cone allowed), across the normal too (static friction);
-// - each other free vertex that will come within h of a surface in this step (at
-//   x + dt v + dt^2 g): held to land at h, approaching no faster than it does.
 // The rest of the cloth then answers to the held vertices inside the solve. Without it, the
 // solve lets a resting vertex fall (or slide) with its neighbours, the contacts stop it alone
 // after the solve, and its edges stretch by their relative speed times the step, every step,
 // whatever the stiffness: the 33 x 33 drape with strain limiting off rests at 19% strain
-// (median over its last 2 s; 3.6% held); a sheet laid on the sphere reached 9.5% at 1/120 s
+// (median over its last 2 s; 4.2% held); a sheet laid on the sphere reached 9.5% at 1/120 s
 // steps at 2e3 ... 2e5 N/m alike, 4% at 1/240 s, 1.3% at 1/960 s (explicit steps: 0.5%).
 // Moving bodies are left to collide_cloth: held to a dynamic body's velocity before the body
 // had answered, a hammock's ball kept bouncing (0.5 m/s after 2.5 s, against < 0.15); held to
 // a keyed body's surface velocity at the step's start, a cape on a box spinning at 30 rad/s
 // went 4.5 mm into it, and static friction and landings against a keyed ball crossing a
-// curtain at 5 and 20 m/s sent vertices 17 m in a frame.
-void World::contact_constraints(int c, double dt, std::vector<ClothContactConstraint>& out) {
+// curtain at 5 and 20 m/s sent vertices 17 m in a frame. Landings are not predicted: holding
+// the vertices that would come within h of a surface during the step (at x + dt v + dt^2 g)
+// to land at h flung vertices of the 257 x 257 drape as its corners hit the ground (the
+// self-collision search then took 12 GB and minutes a frame).
+void World::contact_constraints(int c, std::vector<ClothContactConstraint>& out) {
   const Cloth& cloth = cloths_[c];
   const Points& x = cloth.positions();
-  const Points& v = cloth.velocities();
   const std::vector<char>& pinned = cloth.pinned();
-  const double h = cloth_thickness_[c];
   const int n = cloth.vertex_count();
   ClothTouches& touches = cloth_touches_[c];
   out.clear();
   touches.constrained_body.clear();
-  // the vertices no contact pushed last step that will reach an immovable surface in this one
-  // (at x + dt v + dt^2 g, closer than h): held to land at h (approaching no faster than they
-  // do); found by the same level-set queries as collide_cloth's vertices
-  std::vector<double> landing(n, 0.0);  // (m) their distance to h at x, where touches.normal is set below
-  std::vector<char> predicted(n, 0);
-  const auto candidate = [&](int k) { return Vec3((x.row(k) + dt * v.row(k)).transpose() + dt * dt * settings_.gravity); };
-  const auto free_vertex = [&](int k) { return !pinned[k] && !touches.released[k] && !(touches.normal[k].squaredNorm() > 0.0); };
-  Box3 reach;  // the candidates' box, to skip bodies out of reach
-  for (int k = 0; k < n; ++k) reach.extend(candidate(k));
-  for (int b = 0; b < body_count() && h > 0.0; ++b) {
-    const RigidBodyDef& def = defs_[b];
-    if (!def.shape || !still_surface(b)) continue;
-    const Vec3 nearest = states_[b].x.cwiseMax(reach.min()).cwiseMin(reach.max());
-    if ((nearest - states_[b].x).norm() > def.bounding_radius + h) continue;
-    const Pose pose = mesh_pose(def, states_[b]);
-    Box3 local = def.shape->bounds();
-    local.min().array() -= h;
-    local.max().array() += h;
-    for (int k = 0; k < n; ++k) {
-      if (!free_vertex(k) && !predicted[k]) continue;
-      const Vec3 p = pose.apply_inverse(candidate(k));
-      if (!local.contains(p)) continue;
-      Vec3 n_local;
-      if (def.shape->phi_and_normal(p, n_local) >= h) continue;
-      const Vec3 normal = pose.rotation * n_local;
-      const double gap = def.shape->phi(pose.apply_inverse(Vec3(x.row(k).transpose()))) - h;
-      if (predicted[k] && gap >= landing[k]) continue;  // the nearest surface
-      predicted[k] = 1;
-      landing[k] = gap;
-      touches.normal[k] = normal;
-      touches.body[k] = b;
-    }
-  }
-  if (ground_ && h > 0.0) {
-    for (int k = 0; k < n; ++k) {
-      if ((!free_vertex(k) && !predicted[k]) || candidate(k).y() - ground_->height >= h) continue;
-      const double gap = x(k, 1) - ground_->height - h;
-      if (predicted[k] && gap >= landing[k]) continue;
-      predicted[k] = 1;
-      landing[k] = gap;
-      touches.normal[k] = Vec3::UnitY();
-      touches.body[k] = -1;
-    }
-  }
   for (int k = 0; k < n; ++k) {
     const Vec3 sum = touches.normal[k];
     if (pinned[k] || touches.released[k] || !(sum.squaredNorm() > 0.0)) continue;
     const Vec3 normal = sum.normalized();
     const int body = touches.body[k];
     const Vec3 surface = surface_velocity(body, x.row(k).transpose());
-    double speed = surface.dot(normal);
-    if (predicted[k]) speed += std::max(v.row(k).dot(normal) - speed, -std::max(landing[k], 0.0) / dt);
     ClothContactConstraint held;
     held.vertex = k;
     held.normal = normal;
-    held.speed = speed;
-    held.stick = touches.stuck[k] && !predicted[k];
+    held.speed = surface.dot(normal);
+    held.stick = touches.stuck[k];
     held.surface_velocity = surface;
     out.push_back(held);
     touches.constrained_body.push_back(body);
