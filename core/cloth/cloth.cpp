@@ -188,6 +188,13 @@ double thread_cpu_seconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
+// start + (A x) at block row i, A in 3x3 blocks (summed onto `start`, in block order)
+Vec3 block_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& x, int i, Vec3 start = Vec3::Zero()) {
+  Vec3 q = start;
+  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block[k] * x.segment<3>(3 * a.column[k]);
+  return q;
+}
+
 // Constrained blocks of the implicit system: block `block`'s component along the unit
 // `normal` is fixed (Baraff and Witkin's filter S = I - n n^T there, the identity elsewhere)
 struct Filter {
@@ -216,19 +223,14 @@ void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
 // runs in a fixed order, so the result has the same bits on any thread.
 // With constrained blocks (Baraff and Witkin's modified PCG), z starts from its fixed
 // components (z's own values there along each normal, or all three where fixed in full; the
-// rest is ignored) and every search
-// direction and residual is filtered, so those components stay as they are and the rest
+// rest is ignored) and every search direction and residual is filtered, so those components stay as they are and the rest
 // solves the system in the remaining directions; the preconditioner becomes S P^-1 S, still
 // symmetric.
 int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::VectorXd& b, double tolerance,
                         Eigen::VectorXd& z, const std::vector<Filter>& filter) {
   const cloth_detail::BlockMatrix& a = p.matrix();
   const Eigen::Index size = b.size();
-  const auto multiply = [&](const Eigen::VectorXd& x, int i) {
-    Vec3 q = Vec3::Zero();
-    for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block[k] * x.segment<3>(3 * a.column[k]);
-    return q;
-  };
+  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return block_row_product(a, x, i); };
   Eigen::VectorXd r = b;
   if (filter.empty()) {
     z.setZero(size);
@@ -288,9 +290,7 @@ Vec3 constrained_velocity(const ClothContactConstraint& c, const Vec3& v) {
 // directions once converged)
 Vec3 constraint_residual(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& b, const Eigen::VectorXd& z,
                          int i) {
-  Vec3 q = -b.segment<3>(3 * i);
-  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block[k] * z.segment<3>(3 * a.column[k]);
-  return q;
+  return block_row_product(a, z, i, -b.segment<3>(3 * i));
 }
 
 // The length an edge of rest length `rest` must have when its candidate length is `length`:
@@ -408,6 +408,7 @@ void Cloth::update_velocities(double dt, const Vec3& gravity, std::vector<ClothC
     for (ClothContactConstraint& c : *constraints) {
       require(c.vertex >= 0 && c.vertex < vertex_count(), "constraint: vertex out of range");
       c.impulse = 0.0;
+      c.friction.setZero();
     }
   }
   if (integrator_ == ClothIntegrator::kImplicit) {

@@ -247,18 +247,22 @@ Vec3 World::surface_velocity(int b, const Vec3& p) const {
   return states_[b].v + omega.cross(p - states_[b].x);
 }
 
+// the Coulomb coefficient between cloth c and body b (b < 0: the ground): sqrt(mu_a mu_b)
+double World::surface_friction(int c, int b) const {
+  return std::sqrt(cloth_friction_[c] * (b < 0 ? ground_->friction : defs_[b].friction));
+}
+
 // the ground (b < 0), a static body or a kinematic one not moving in this step
 bool World::still_surface(int b) const { return b < 0 || (defs_[b].kinematic && !moving_kinematic(b)); }
 
 // The contacts cloth c's implicit solve holds (WorldSettings::cloth_contacts_in_solve; Baraff
 // and Witkin 1998, 5.3), against still surfaces (the ground, static bodies and kinematic ones
 // not moving in this step; still_surface):
-// - each free vertex a contact pushed in the last step (collide_cloth: its own contact, or one
-//   of an edge point or of a body's feature it shares; or this stage's own hold, when the
-//   surface pushed), unless the surface had to pull then: its velocity along the contacts'
-//   mean normal becomes the surface's; if friction stopped its slip (and the solve's hold
-//   needed no more than the friction cone allowed), across the normal too (static friction);
-// The rest of the cloth then answers to the held vertices inside the solve. Without it, the
+// each free vertex a contact pushed in the last step (collide_cloth: its own contact, or one of
+// an edge point or of a body's feature it shares; or this stage's own hold, when the surface
+// pushed), unless the surface had to pull then. Its velocity along the contacts' mean normal
+// becomes the surface's; if friction stopped its slip (and the solve's hold needed no more than
+// the friction cone allowed), across the normal too (static friction). The rest of the cloth then answers to the held vertices inside the solve. Without it, the
 // solve lets a resting vertex fall (or slide) with its neighbours, the contacts stop it alone
 // after the solve, and its edges stretch by their relative speed times the step, every step,
 // whatever the stiffness: the 33 x 33 drape with strain limiting off rests at 19% strain
@@ -305,9 +309,8 @@ void World::contact_constraints(int c, std::vector<ClothContactConstraint>& out)
 // after the solve may touch it) and gets Coulomb friction from the solve's normal impulse
 // (Bridson, Fedkiw and Anderson 2002, as collide_cloth's): a sliding one's slip relative to
 // the surface reduced by mu times that impulse over the mass, at most to zero (then it sticks
-// in the next step); a sticking one keeps the surface's velocity unless the solve needed more
-// than mu times the normal impulse across it, in which case it gives back the excess and
-// slides in the next step
+// in the next step); a sticking one keeps the surface's velocity, and slides from the next
+// step on if the solve needed more than mu times the normal impulse across it
 void World::apply_constraint_impulses(int c, const std::vector<ClothContactConstraint>& constraints) {
   Cloth& cloth = cloths_[c];
   ClothTouches& touches = cloth_touches_[c];
@@ -321,7 +324,7 @@ void World::apply_constraint_impulses(int c, const std::vector<ClothContactConst
     const int b = touches.constrained_body[i];
     touches.normal[k.vertex] += k.normal;
     touches.body[k.vertex] = b;
-    const double mu = std::sqrt(cloth_friction_[c] * (b < 0 ? ground_->friction : defs_[b].friction));
+    const double mu = surface_friction(c, b);
     const double m = cloth.masses()[k.vertex];
     auto v = cloth.velocities().row(k.vertex);
     if (k.stick) {
@@ -426,7 +429,7 @@ void World::collide_cloth(int c, double dt) {
     // quick reject: the body's bounding sphere misses the cloth's box
     const Vec3 nearest = states_[b].x.cwiseMax(reach.min()).cwiseMin(reach.max());
     if ((nearest - states_[b].x).norm() > radius) continue;
-    const double mu = std::sqrt(cloth_friction_[c] * def.friction);
+    const double mu = surface_friction(c, b);
     bool touched = false;
     for (int k = 0; k < n; ++k) {
       if (pinned[k]) continue;
@@ -462,7 +465,7 @@ void World::collide_cloth(int c, double dt) {
     if (touched && asleep_[b]) wake_island(b);
   }
   if (ground_) {
-    const double mu = std::sqrt(cloth_friction_[c] * ground_->friction);
+    const double mu = surface_friction(c, -1);
     for (int k = 0; k < n; ++k) {
       if (pinned[k]) continue;
       const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();

@@ -252,6 +252,7 @@ class World {
   void collide_cloth(int c, double dt);
   Vec3 surface_velocity(int b, const Vec3& p) const;
   bool still_surface(int b) const;
+  double surface_friction(int c, int b) const;
   void contact_constraints(int c, std::vector<ClothContactConstraint>& out);
   void apply_constraint_impulses(int c, const std::vector<ClothContactConstraint>& constraints);
   // a body's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact

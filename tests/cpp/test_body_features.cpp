@@ -66,6 +66,17 @@ TEST(BodyFeatures, FeatureAgainstTriangle) {
 
 namespace {
 
+// a 1 m sheet of n x n vertices at y = 1 m, centred on the y axis, pinned along its border
+ClothDesc bordered_sheet(int n) {
+  ClothDesc sheet = test::grid_cloth(n, n, 1.0, 1.0, Vec3(-0.5, 1.0, -0.5));
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      if (i == 0 || j == 0 || i == n - 1 || j == n - 1) sheet.pinned.push_back(j * n + i);
+    }
+  }
+  return sheet;
+}
+
 // whether segment (p, q) crosses triangle (a, b, c) strictly (ends on opposite sides of the
 // plane, the crossing inside the triangle by barycentric coordinates)
 bool segment_crosses(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c) {
@@ -87,13 +98,7 @@ bool segment_crosses(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b,
 TEST(BodyFeatures, BoxCornerNeverPokesThroughATautSheet) {
   World world;
   const int n = 21;
-  ClothDesc sheet = test::grid_cloth(n, n, 1.0, 1.0, Vec3(-0.5, 1.0, -0.5));
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) {
-      if (i == 0 || j == 0 || i == n - 1 || j == n - 1) sheet.pinned.push_back(j * n + i);
-    }
-  }
-  world.add_cloth(sheet, 0.3, 0.005, false);
+  world.add_cloth(bordered_sheet(n), 0.3, 0.005, false);
   // the rotation taking the corner (-1, -1, -1) / sqrt(3) to -y
   const Vec3 corner_dir = -Vec3::Ones().normalized();
   const Quat turn = Quat::FromTwoVectors(corner_dir, -Vec3::UnitY());
@@ -219,13 +224,7 @@ struct SheetRun {
 SheetRun drive_into_sheet(const BodyDesc& body, const TriangleMesh& mesh) {
   World world;
   const int n = 21;
-  ClothDesc sheet = test::grid_cloth(n, n, 1.0, 1.0, Vec3(-0.5, 1.0, -0.5));
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) {
-      if (i == 0 || j == 0 || i == n - 1 || j == n - 1) sheet.pinned.push_back(j * n + i);
-    }
-  }
-  world.add_cloth(sheet, 0.3, 0.005, false);
+  world.add_cloth(bordered_sheet(n), 0.3, 0.005, false);
   world.add_body(body);
   SheetRun run;
   const auto edges = unique_edges(mesh.triangles);
