@@ -262,12 +262,13 @@ bool World::still_surface(int b) const { return b < 0 || (defs_[b].kinematic && 
 // an edge point or of a body's feature it shares; or this stage's own hold, when the surface
 // pushed), unless the surface had to pull then. Its velocity along the contacts' mean normal
 // becomes the surface's; if friction stopped its slip (and the solve's hold needed no more than
-// the friction cone allowed), across the normal too (static friction). The rest of the cloth then answers to the held vertices inside the solve. Without it, the
-// solve lets a resting vertex fall (or slide) with its neighbours, the contacts stop it alone
-// after the solve, and its edges stretch by their relative speed times the step, every step,
-// whatever the stiffness: the 33 x 33 drape with strain limiting off rests at 19% strain
-// (median over its last 2 s; 4.2% held); a sheet laid on the sphere reached 9.5% at 1/120 s
-// steps at 2e3 ... 2e5 N/m alike, 4% at 1/240 s, 1.3% at 1/960 s (explicit steps: 0.5%).
+// the friction cone allowed), across the normal too (static friction). The rest of the cloth
+// then answers to the held vertices inside the solve. Without it, the solve lets a resting
+// vertex fall (or slide) with its neighbours, the contacts stop it alone after the solve, and
+// its edges stretch by their relative speed times the step, every step: the 33 x 33 drape at
+// 2000 N/m with strain limiting off rests at 19% strain (median over its last 2 s; 4.2% held;
+// benchmarks/cloth/strain_trace.py); a sheet laid on the sphere 9.2% (4.3% held, 1.2% by short
+// explicit steps; ClothWorld.ContactsHeldInTheSolve...).
 // Moving bodies are left to collide_cloth: held to a dynamic body's velocity before the body
 // had answered, a hammock's ball kept bouncing (0.5 m/s after 2.5 s, against < 0.15); held to
 // a keyed body's surface velocity at the step's start, a cape on a box spinning at 30 rad/s

@@ -252,7 +252,7 @@ TEST(ClothWorld, ABodyByThePinsDoesNotHurlTheCloth) {
 // A sheet laid just above a sphere drapes over it. If the implicit solve does not know which
 // vertices rest on the sphere, it lets them fall with their neighbours, the contacts stop them
 // alone after the solve, and their edges stretch by the relative speed times the step, every
-// step, whatever the stiffness: 9.2% here at 1/120 s steps. Held inside the solve
+// step: 9.2% here at 1/120 s steps. Held inside the solve
 // (WorldSettings::cloth_contacts_in_solve), the neighbours answer to them at once: 4.3%. The
 // reference is the same drape by explicit steps short enough to resolve it (1.2%); strain
 // limiting off in all three. Asked: the reference under 2%, held under 5% (half the usual
