@@ -90,7 +90,8 @@ def main() -> None:
     spec.report("simbake", args.n, settings, wall, meter, cpu_seconds=cpu,
                 cloth_steps=stats["cloth_steps"], substeps=stats["substeps"],
                 solver_iterations=stats["cloth_solver_iterations"], solver_cpu_seconds=stats["cloth_solver_seconds"],
-                profile=world.profile())
+                profile=world.profile(),
+                self_collision={k: v for k, v in stats.items() if k.startswith(("self_", "impact_"))})
 
 
 if __name__ == "__main__":
