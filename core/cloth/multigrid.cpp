@@ -231,6 +231,38 @@ BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern) {
   return m;
 }
 
+BlockMatrix upper_triangle(const BlockMatrix& full) {
+  std::vector<std::vector<int>> rows(full.size);
+  std::vector<int> source, stride;
+  for (int i = 0; i < full.size; ++i) {
+    for (int k = full.diagonal[i]; k < full.start[i + 1]; ++k) {
+      rows[i].push_back(full.column[k]);
+      if (!full.source.empty()) {
+        source.push_back(full.source[k]);
+        stride.push_back(full.stride[k]);
+      }
+    }
+  }
+  BlockMatrix m = block_pattern(rows);
+  m.source = std::move(source);
+  m.stride = std::move(stride);
+  return m;
+}
+
+void symmetric_product(const BlockMatrix& upper, const Eigen::VectorXd& x, Eigen::VectorXd& y) {
+  y.setZero(x.size());
+  for (int i = 0; i < upper.size; ++i) {
+    const Vec3 xi = at(x, i);
+    Vec3 s = upper.block[upper.start[i]] * xi;
+    for (int k = upper.start[i] + 1; k < upper.start[i + 1]; ++k) {
+      const int j = upper.column[k];
+      s.noalias() += upper.block[k] * at(x, j);
+      at(y, j).noalias() += upper.block[k].transpose() * xi;
+    }
+    at(y, i) += s;
+  }
+}
+
 void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
   const double* values = a.valuePtr();
   for (size_t k = 0; k < m.block.size(); ++k) {
@@ -246,9 +278,7 @@ void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
 // ---- block-Jacobi
 
 void BlockJacobi::update(const Eigen::SparseMatrix<double>& a) {
-  if (matrix_.size != a.cols() / 3 || matrix_.block.size() * 9 != static_cast<size_t>(a.nonZeros())) {
-    matrix_ = block_matrix(a);
-  }
+  if (matrix_.size != a.cols() / 3 || matrix_.source.empty()) matrix_ = upper_triangle(block_matrix(a));
   copy_values(a, matrix_);
   invert_diagonal(matrix_, inverse_);
 }
@@ -264,26 +294,32 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
                      const Eigen::VectorXd& scale, bool neighbours_only) {
   const int n = static_cast<int>(pattern.cols() / 3);
   if (static_cast<int>(edges.size()) != n || scale.size() != n) throw std::invalid_argument("multigrid: one edge list and scale per block");
-  system_ = block_matrix(pattern);
+  const BlockMatrix full = block_matrix(pattern);
+  system_ = upper_triangle(full);
   Graph graph = edges;
   for (std::vector<int>& row : graph) {
     std::sort(row.begin(), row.end());
     row.erase(std::unique(row.begin(), row.end()), row.end());
   }
   // the finest level: the system's blocks on the diagonal and between mesh neighbours
+  const auto keep = [&](int i, int j) {
+    return !neighbours_only || j == i || std::binary_search(graph[i].begin(), graph[i].end(), j);
+  };
   std::vector<std::vector<int>> rows(n);
   for (int i = 0; i < n; ++i) {
-    for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
-      const int j = system_.column[k];
-      if (!neighbours_only || j == i || std::binary_search(graph[i].begin(), graph[i].end(), j)) rows[i].push_back(j);
+    for (int k = full.start[i]; k < full.start[i + 1]; ++k) {
+      if (keep(i, full.column[k])) rows[i].push_back(full.column[k]);
     }
   }
   matrix_.push_back(block_pattern(rows));
   kept_.assign(system_.column.size(), -1);
+  kept_transposed_.assign(system_.column.size(), -1);
   for (int i = 0; i < n; ++i) {
     for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
       const int j = system_.column[k];
-      if (!neighbours_only || j == i || std::binary_search(graph[i].begin(), graph[i].end(), j)) kept_[k] = entry(matrix_[0], i, j);
+      if (!keep(i, j)) continue;
+      kept_[k] = entry(matrix_[0], i, j);
+      if (j != i) kept_transposed_[k] = entry(matrix_[0], j, i);
     }
   }
 
@@ -386,10 +422,14 @@ void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
   std::fill(fine.block.begin(), fine.block.end(), Mat3::Zero());
   for (int i = 0; i < system_.size; ++i) {
     for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
+      const int j = system_.column[k];
       if (kept_[k] >= 0) {
         fine.block[kept_[k]] += system_.block[k];
-      } else {
-        fine.block[fine.diagonal[i]] += lumped(system_.block[k]);
+        if (kept_transposed_[k] >= 0) fine.block[kept_transposed_[k]] += system_.block[k].transpose();
+      } else {  // the pair (i, j), (j, i) = (i, j)^T
+        const Mat3 l = lumped(system_.block[k]);
+        fine.block[fine.diagonal[i]] += l;
+        fine.block[fine.diagonal[j]] += l;
       }
     }
   }
