@@ -164,13 +164,6 @@ constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr double kConstraintStiffness = 100.0;  // see implicit_velocities (any large value: it only shapes the preconditioner)
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
 constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices
-// Multigrid's finest level keeps only the blocks between mesh neighbours when the bending
-// stiffness is under this x stretch stiffness x mean edge^2 (the drape: 1e-5 at 33 x 33, less
-// finer). There the V-cycle reads 7 blocks a row instead of 13, at the same iteration count
-// (draped sheet, bending 1e-4 and 1e-2 N m: 9 and 11 iterations against 9 and 9); with
-// leather-stiff bending (1 N m, 0.13) the lumped far blocks cost 45 iterations against 17
-// (test_multigrid.cpp, DroppedBendingBlocksKeepTheCycleSymmetricPositiveDefinite).
-constexpr double kWeakBending = 1e-2;
 // Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more,
 // block-Jacobi otherwise. On the drape multigrid takes 4-9x fewer iterations from 33 x 33 up,
 // with a smaller profile error at 33-129; at 17 x 17 (289 vertices) block-Jacobi's cheaper
@@ -374,14 +367,7 @@ Cloth::Cloth(const ClothDesc& desc)
     for (int v = 0; v < n; ++v) {
       if (free_index_[v] >= 0) scale[free_index_[v]] = std::sqrt(mass_[v]);
     }
-    // the V-cycle's finest level drops the bending hinges' far blocks when bending is weak
-    // against stretching at the mesh's scale (multigrid.cpp, Multigrid::update)
-    double edge_length = 0.0;
-    for (const cloth_detail::Edge& e : model_->edges()) edge_length += e.rest;
-    edge_length /= static_cast<double>(std::max<size_t>(1, model_->edges().size()));
-    const bool neighbours_only = desc.material.bend_stiffness <
-                                 kWeakBending * desc.material.stretch_stiffness * edge_length * edge_length;
-    preconditioner_ = std::make_shared<cloth_detail::Multigrid>(pattern_->make_matrix(), graph, scale, neighbours_only);
+    preconditioner_ = std::make_shared<cloth_detail::Multigrid>(pattern_->make_matrix(), graph, scale);
   } else {
     preconditioner_ = std::make_shared<cloth_detail::BlockJacobi>();
   }

@@ -59,8 +59,6 @@
 //    thread, so the result has the same bits at any thread count.
 #include "cloth/multigrid.h"
 
-#include <Eigen/Eigenvalues>
-
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -184,22 +182,6 @@ int entry(const BlockMatrix& m, int i, int j) {
   return static_cast<int>(std::lower_bound(begin, end, j) - m.column.data());
 }
 
-// What a dropped block E = A_ij of the finest level adds to its row's diagonal block: its
-// symmetric part S, so that A's action on translations is kept (the smooth error a V-cycle
-// leaves to its coarse levels: a shift of the diagonal there would stiffen the lowest modes,
-// whose eigenvalue is 1, the mass), plus (2 c + a) I with c = max(0, -lambda_min(S)) and
-// a = |E - S|_F. Replacing the pair [0, E; E^T, 0] by [L, 0; 0, L] adds
-//   [1 -1; -1 1] (x) (S + c I)  +  [1 1; 1 1] (x) c I  +  [a I, -(E - S); (E - S), a I],
-// each positive semi-definite, so the level stays symmetric positive definite (>= A).
-Mat3 lumped(const Mat3& e) {
-  const Mat3 symmetric = 0.5 * (e + e.transpose());
-  Eigen::SelfAdjointEigenSolver<Mat3> eigen;
-  eigen.computeDirect(symmetric, Eigen::EigenvaluesOnly);
-  const double c = std::max(0.0, -eigen.eigenvalues()[0]);
-  const double a = (e - symmetric).norm();
-  return symmetric + (2.0 * c + a) * Mat3::Identity();
-}
-
 // inverses of the diagonal blocks (a zero block, of a vertex with no mass, stays zero)
 void invert_diagonal(const BlockMatrix& m, std::vector<Mat3, Eigen::aligned_allocator<Mat3>>& inverse) {
   inverse.resize(m.size);
@@ -291,36 +273,25 @@ void BlockJacobi::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
 // ---- multigrid: the hierarchy (once per cloth)
 
 Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vector<std::vector<int>>& edges,
-                     const Eigen::VectorXd& scale, bool neighbours_only) {
+                     const Eigen::VectorXd& scale) {
   const int n = static_cast<int>(pattern.cols() / 3);
   if (static_cast<int>(edges.size()) != n || scale.size() != n) throw std::invalid_argument("multigrid: one edge list and scale per block");
-  const BlockMatrix full = block_matrix(pattern);
-  system_ = upper_triangle(full);
+  // the conjugate gradients' matrix is the upper triangle; the V-cycle's sweeps read whole rows
+  matrix_.push_back(block_matrix(pattern));
+  system_ = upper_triangle(matrix_[0]);
+  fine_entry_.assign(system_.column.size(), -1);
+  fine_transposed_.assign(system_.column.size(), -1);
+  for (int i = 0; i < n; ++i) {
+    for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
+      const int j = system_.column[k];
+      fine_entry_[k] = entry(matrix_[0], i, j);
+      if (j != i) fine_transposed_[k] = entry(matrix_[0], j, i);
+    }
+  }
   Graph graph = edges;
   for (std::vector<int>& row : graph) {
     std::sort(row.begin(), row.end());
     row.erase(std::unique(row.begin(), row.end()), row.end());
-  }
-  // the finest level: the system's blocks on the diagonal and between mesh neighbours
-  const auto keep = [&](int i, int j) {
-    return !neighbours_only || j == i || std::binary_search(graph[i].begin(), graph[i].end(), j);
-  };
-  std::vector<std::vector<int>> rows(n);
-  for (int i = 0; i < n; ++i) {
-    for (int k = full.start[i]; k < full.start[i + 1]; ++k) {
-      if (keep(i, full.column[k])) rows[i].push_back(full.column[k]);
-    }
-  }
-  matrix_.push_back(block_pattern(rows));
-  kept_.assign(system_.column.size(), -1);
-  kept_transposed_.assign(system_.column.size(), -1);
-  for (int i = 0; i < n; ++i) {
-    for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
-      const int j = system_.column[k];
-      if (!keep(i, j)) continue;
-      kept_[k] = entry(matrix_[0], i, j);
-      if (j != i) kept_transposed_[k] = entry(matrix_[0], j, i);
-    }
   }
 
   // coarser levels while they pay
@@ -412,26 +383,10 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
 
 void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
   copy_values(a, system_);
-  // the finest level: A less the blocks E_ij it drops, each lumped onto both diagonals
-  // (`lumped`), which keeps it symmetric positive definite. The blocks dropped are the bending hinges'
-  // far pairs (a hinge's two wing vertices, which share no mesh edge): 6 of 13 blocks a row
-  // on a grid, ~1000x weaker than the stretch blocks on the drape. The V-cycle then reads 7
-  // blocks a row instead of 13 and its coarse levels are sparser; the conjugate gradients
-  // still multiply by the whole system, so the answer is that of A.
   BlockMatrix& fine = matrix_[0];
-  std::fill(fine.block.begin(), fine.block.end(), Mat3::Zero());
-  for (int i = 0; i < system_.size; ++i) {
-    for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
-      const int j = system_.column[k];
-      if (kept_[k] >= 0) {
-        fine.block[kept_[k]] += system_.block[k];
-        if (kept_transposed_[k] >= 0) fine.block[kept_transposed_[k]] += system_.block[k].transpose();
-      } else {  // the pair (i, j), (j, i) = (i, j)^T
-        const Mat3 l = lumped(system_.block[k]);
-        fine.block[fine.diagonal[i]] += l;
-        fine.block[fine.diagonal[j]] += l;
-      }
-    }
+  for (size_t k = 0; k < system_.block.size(); ++k) {
+    fine.block[fine_entry_[k]] = system_.block[k];
+    if (fine_transposed_[k] >= 0) fine.block[fine_transposed_[k]] = system_.block[k].transpose();
   }
   // Galerkin products level by level: B = A P, then A_(l+1) = P^T B
   for (size_t l = 0; l + 1 < matrix_.size(); ++l) {

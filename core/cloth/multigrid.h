@@ -98,10 +98,8 @@ class Multigrid final : public Preconditioner {
   // the aggregates follow it), and the value per block of the system's rigid translations
   // (sqrt(m) for the mass-scaled system, whose unknown is M^1/2 dv). Built once per cloth;
   // only values change afterwards.
-  // With neighbours_only the finest level keeps only the blocks between mesh neighbours (see
-  // update): for a cloth whose bending is weak against its stretching.
   Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vector<std::vector<int>>& edges,
-            const Eigen::VectorXd& scale, bool neighbours_only = true);
+            const Eigen::VectorXd& scale);
 
   void update(const Eigen::SparseMatrix<double>& a) override;
   void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
@@ -118,11 +116,8 @@ class Multigrid final : public Preconditioner {
     std::vector<double> weight;
   };
   BlockMatrix system_;                        // the system's upper triangle (what the conjugate gradients multiply by)
-  // the finest level: the system's blocks between mesh neighbours (and the diagonal); each
-  // block dropped (a bending hinge's far pair) adds its Frobenius norm x I to both of its
-  // diagonal blocks, so the level stays symmetric positive definite (see update)
-  std::vector<int> kept_;                     // (system_'s entries) the finest level's entry (i, j), or -1
-  std::vector<int> kept_transposed_;          // (system_'s entries) the finest level's entry (j, i), or -1
+  // (system_'s entries) where each of its blocks goes in the finest level: (i, j) and (j, i)
+  std::vector<int> fine_entry_, fine_transposed_;
   std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
   std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
   std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l

@@ -714,33 +714,32 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
   }
   update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats);
   if (new_step || s.h != h) {
-    // every pair to be measured again
+    // every pair measured again (in the same pass over the pairs that measures them)
     s.x = x;
     s.h = h;
-    for (auto& pairs : c.pairs) {
-      for (Pair& p : pairs) {
-        p.distance = kUnmeasured;
-        p.clear = -1;
-        p.exact = false;
-      }
-    }
     s.proximity.clear();
-    s.measured = false;
+    measure(x, h, true);
+  } else if (!s.measured) {
+    measure(x, h, false);
   }
-  if (!s.measured) measure(x, h);
   return s;
 }
 
 // The distances of the pairs not yet measured: the gap between the two sides' boxes where it
 // is at least h (a lower bound, for the continuous test to refine if it must), the exact
 // distance otherwise; the pairs closer than h join the repulsion contacts
-void SelfCollision::measure(const Points& x, double h) {
+void SelfCollision::measure(const Points& x, double h, bool all) {
   for (int kind = 0; kind < 2; ++kind) {
     auto& pairs = candidates_.pairs[kind];
     const int split = kind == 0 ? 1 : 2;
     parallel_collect(pairs.size(), start_.proximity, [&](size_t n, std::vector<Contact>& found) {
       Pair& p = pairs[n];
-      if (!std::isnan(p.distance)) return;
+      if (all) {
+        p.clear = -1;
+        p.exact = false;
+      } else if (!std::isnan(p.distance)) {
+        return;
+      }
       Box3 first, second;
       for (int k = 0; k < 4; ++k) (k < split ? first : second).extend(row(x, p.vertex[k]));
       const double gap = (first.min() - second.max()).cwiseMax(second.min() - first.max()).cwiseMax(0.0).norm();

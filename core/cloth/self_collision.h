@@ -173,7 +173,9 @@ class SelfCollision {
                     SelfCollisionStatistics& stats);
   const Start& start(const Points& x, const Points& v, double dt, const SelfCollisionSettings& settings,
                      SelfCollisionStatistics& stats);
-  void measure(const Points& x, double h);
+  // the distances of the pairs not measured yet (all: of every pair, each also no longer
+  // clear nor exact, as at a new step)
+  void measure(const Points& x, double h, bool all);
   void collision_contacts(const Points& x, const Points& v, double dt, const SelfCollisionSettings& settings,
                           std::vector<Contact>& out, SelfCollisionStatistics& stats);
 };
