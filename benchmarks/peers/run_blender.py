@@ -28,8 +28,13 @@ Settings (bpy 5.0.1 from PyPI, factory settings, Z up: scenes are converted from
   the L's two boxes, the sphere whole): Blender's way to a nonconvex active body made of
   convex parts; or MESH: Bullet's GImpact triangle mesh of the object itself, which Blender
   allows for active bodies (compare.py runs it once as an extra). Margins: Blender's
-  defaults (convex hulls: 0.04 m embedded, i.e. the hull shrunk by it where it fits; MESH:
-  0.04 m around the triangles).
+  defaults (convex hulls: 0.04 m embedded, i.e. the hull shrunk by it and the margin added
+  back round it, which rounds the hull's edges and corners: a box-like corner of the true
+  mesh can then sit up to (sqrt 3 - 1) 0.04 = 29 mm inside what it rests on; MESH: 0.04 m
+  round the triangles, so bodies rest up to 4 cm apart). Initial velocities: Blender has
+  no setting for a rigid body's initial velocity (keying 'Animated' off after a keyed first
+  frame did not hand over the spin in bpy 5.0.1), so pile.toml's initial spins (up to
+  2 rad/s) are NOT given: Blender's bodies start at rest.
 Only scene.frame_set (which steps the rigid body world, and evaluates the depsgraph as
 Blender always does) is timed.
 """
