@@ -249,6 +249,9 @@ def write_markdown(payload: dict, path: Path) -> None:
               + "; below 1 = faster than real time), then "
               "the accuracy. Frames of 1/24 s; setup, model compilation and pose read-back are outside the clock.", "",
               "Versions: " + ", ".join(f"{LABELS[e]} {payload['versions'].get(e, '-')}" for e in engines) + ".", ""]
+    if payload["options"].get("command"):
+        lines += [f"Reproduce: `{payload['options']['command']}` (from the repository's root; the peers' venvs "
+                  "as in benchmarks/peers/README.md).", ""]
     header = "| scene | " + " | ".join(LABELS[e] for e in engines) + " |"
     lines += [header, "|" + " --- |" * (len(engines) + 1)]
     for scene in payload["scenes"]:
