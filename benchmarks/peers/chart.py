@@ -22,7 +22,8 @@ SCENE_LABELS = {
     "tower": "(a) tower\n10 boxes", "pyramid": "(c) pyramid\n120 boxes",
     "pile": "(b) pile\n1000 boxes", "pile216": "(b') pile\n216 boxes",
     "drop": "(d) sphere drop\ne 0.5", "incline_slide": "(e) incline\nmu 0.5",
-    "incline_stick": "(e) incline\nmu 0.7",
+    "incline_stick": "(e) incline\nmu 0.7", "pile_aligned": "(b) pile\n1000 aligned",
+    "pile_meshes": "(f) pile.toml\n200 meshes",
 }
 
 

@@ -4,6 +4,7 @@
     python3 benchmarks/peers/compare.py --quick          # short durations, one run each
     python3 benchmarks/peers/compare.py --engines simbake mujoco --scenes tower drop
     python3 benchmarks/peers/compare.py --seconds pyramid=5 pile=2 --simbake-pile-seconds 5
+    python3 benchmarks/peers/compare.py --scenes pile_meshes --cpu 1   # pile.toml's 200 meshes
 
 Each engine runs in its own interpreter (simbake: /work/main/.venv; PyBullet and MuJoCo:
 benchmarks/peers/.venv-peers; Blender: benchmarks/peers/.venv-bpy), one subprocess per run,
@@ -40,7 +41,8 @@ ENGINES = {
     "blender": (HERE / ".venv-bpy" / "bin" / "python", HERE / "run_blender.py"),
 }
 LABELS = {"simbake": "simbake", "pybullet": "PyBullet", "mujoco": "MuJoCo", "blender": "Blender (bpy)"}
-SCENE_ORDER = ["tower", "pyramid", "pile", "pile_aligned", "pile216", "drop", "incline_slide", "incline_stick"]
+SCENE_ORDER = ["tower", "pyramid", "pile", "pile_aligned", "pile216", "pile_meshes", "drop", "incline_slide",
+               "incline_stick"]
 SCENE_LABELS = {
     "tower": "(a) tower, 10 boxes",
     "pyramid": "(c) pyramid, 120 boxes",
@@ -50,6 +52,7 @@ SCENE_LABELS = {
     "drop": "(d) sphere drop, e 0.5",
     "incline_slide": "(e) incline 30 deg, mu 0.5",
     "incline_stick": "(e) incline 30 deg, mu 0.7",
+    "pile_meshes": "(f) mesh pile, pile.toml: 200 tori, L-shapes, spheres",
 }
 
 
@@ -59,7 +62,7 @@ def scene_label(payload: dict, scene: str) -> str:
              if "error" not in payload["results"][e][scene]]
     span = statistics.mode(spans) if spans else None
     return SCENE_LABELS.get(scene, scene) + (f", {span:g} s" if span else "")
-QUICK_SECONDS = {"tower": 2.0, "pyramid": 2.0, "pile": 1.0, "pile_aligned": 1.0, "pile216": 2.0}
+QUICK_SECONDS = {"tower": 2.0, "pyramid": 2.0, "pile": 1.0, "pile_aligned": 1.0, "pile216": 2.0, "pile_meshes": 1.0}
 # extra runs (once each): settings that change an engine's answer a lot
 EXTRAS = [
     ("blender", "drop", ["--substeps", "20"], "20 substeps per frame"),
@@ -67,6 +70,7 @@ EXTRAS = [
     ("blender", "drop", ["--substeps", "100"], "100 substeps per frame"),
     ("blender", "tower", ["--default-damping"], "default damping (linear 0.04, angular 0.1)"),
     ("blender", "pyramid", ["--default-damping"], "default damping (linear 0.04, angular 0.1)"),
+    ("blender", "pile_meshes", ["--mesh-shape", "MESH"], "MESH collision shape (Bullet GImpact) instead of COMPOUND"),
 ]
 THREAD_VARIABLES = ["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
                     "VECLIB_MAXIMUM_THREADS", "TBB_NUM_THREADS", "BLIS_NUM_THREADS"]
@@ -81,7 +85,12 @@ def child_environment() -> dict:
     return env
 
 
+PIN_CPU = None   # --cpu; None: the last CPU this process may use
+
+
 def pinned_cpu() -> int | None:
+    if PIN_CPU is not None:
+        return PIN_CPU
     if hasattr(os, "sched_getaffinity"):
         return sorted(os.sched_getaffinity(0))[-1]
     return None
@@ -132,6 +141,7 @@ def aggregate(runs: list) -> dict:
         return {"error": runs[0]["error"] if runs else "not run", "runs": runs}
     first = good[0]
     rates = [r["wall_per_simulated_second"] for r in good]
+    cpu_rates = [r["step_cpu_seconds"] / r["simulated_seconds"] for r in good if r.get("simulated_seconds")]
     by_second = [r["wall_per_simulated_second_by_second"] for r in good]
     first_second = [b[0] for b in by_second if b]
     cpu_over_wall = [r["step_cpu_seconds"] / r["step_wall_seconds"] for r in good if r["step_wall_seconds"] > 0]
@@ -141,6 +151,8 @@ def aggregate(runs: list) -> dict:
         "simulated_seconds": first["simulated_seconds"],
         "wall_per_simulated_second": statistics.median(rates),
         "wall_per_simulated_second_runs": rates,
+        "cpu_per_simulated_second": statistics.median(cpu_rates) if cpu_rates else None,
+        "cpu_per_simulated_second_runs": cpu_rates,
         "first_second_wall": statistics.median(first_second) if first_second else None,
         "step_cpu_over_wall": statistics.median(cpu_over_wall) if cpu_over_wall else None,
         "runs": len(good),
@@ -237,6 +249,9 @@ def write_markdown(payload: dict, path: Path) -> None:
               + "; below 1 = faster than real time), then "
               "the accuracy. Frames of 1/24 s; setup, model compilation and pose read-back are outside the clock.", "",
               "Versions: " + ", ".join(f"{LABELS[e]} {payload['versions'].get(e, '-')}" for e in engines) + ".", ""]
+    if payload["options"].get("command"):
+        lines += [f"Reproduce: `{payload['options']['command']}` (from the repository's root; the peers' venvs "
+                  "as in benchmarks/peers/README.md).", ""]
     header = "| scene | " + " | ".join(LABELS[e] for e in engines) + " |"
     lines += [header, "|" + " --- |" * (len(engines) + 1)]
     for scene in payload["scenes"]:
@@ -261,7 +276,7 @@ def write_markdown(payload: dict, path: Path) -> None:
         lines += ["## Piles in detail", "",
                   "| engine | scene | simulated s | runs | wall / sim s | first second | vmax end (m/s) | "
                   "below ground | lowest centre (m) | highest centre (m) | farthest centre from the axis (m) | exploded | "
-                  "deepest penetration (mm) | box into box / ground (mm) | at (s) | penetration at end (mm) |",
+                  "deepest penetration (mm) | body into body / ground (mm) | at (s) | penetration at end (mm) |",
                   "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
         for scene in [s for s in payload["scenes"] if s.startswith("pile")]:
             for e in engines:
@@ -273,7 +288,7 @@ def write_markdown(payload: dict, path: Path) -> None:
                              f"{fmt(entry['wall_per_simulated_second'])} | {fmt(entry['first_second_wall'])} | "
                              f"{fmt(a.get('max_speed_end'))} | {a.get('below_ground')} | {fmt(a.get('min_height_end'))} | "
                              f"{fmt(a.get('max_height_end'))} | {fmt(a.get('max_radius_end'))} | {a.get('exploded')} | "
-                             f"{fmt(a.get('penetration_mm'))} | {fmt(a.get('penetration_boxes_mm'))} / "
+                             f"{fmt(a.get('penetration_mm'))} | {fmt(a.get('penetration_boxes_mm', a.get('penetration_bodies_mm')))} / "
                              f"{fmt(a.get('penetration_ground_mm'))} | {fmt(a.get('penetration_time'))} | "
                              f"{fmt(a.get('penetration_end_mm'))} |")
         lines += ["", "'first second' is the stepping wall time of simulated second 1 (free fall and the "
@@ -283,6 +298,55 @@ def write_markdown(payload: dict, path: Path) -> None:
                   "poses at every frame by the same code (scenes.box_penetration: the separating-axis "
                   "overlap of each pair of boxes closer than their diagonals, and box corners below the "
                   "ground), so edge-edge overlaps that a sample-based contact misses are counted.", ""]
+
+    # the mesh pile
+    if "pile_meshes" in payload["scenes"]:
+        scene = "pile_meshes"
+        method = next((res[e][scene]["accuracy"].get("penetration_method") for e in engines
+                       if "error" not in res[e][scene]), "")
+        lines += ["## Mesh pile: assets/scenes/pile.toml (200 nonconvex meshes, 6 s)", "",
+                  "| engine | nonconvex meshes as | runs | CPU s / sim s | wall s / sim s | deepest body into body (mm) | "
+                  "deepest into ground (mm) | body / ground at end (mm) | max speed, last frame (m/s) | mean speed (m/s) | "
+                  "centres below ground | farthest centre from the axis (m) | exploded |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+        for e in engines:
+            entry = res.get(e, {}).get(scene)
+            if not entry:
+                continue
+            if "error" in entry:
+                lines.append(f"| {LABELS[e]} | failed: {entry['error'][:80]} |" + " |" * 11)
+                continue
+            a, st = entry["accuracy"], entry["settings"]
+            shape = st.get("nonconvex_meshes", "")
+            lines.append(f"| {LABELS[e]} | {shape} | {entry['runs']} | {fmt(entry.get('cpu_per_simulated_second'))} | "
+                         f"{fmt(entry['wall_per_simulated_second'])} | {fmt(a.get('penetration_bodies_mm'))} "
+                         f"(at {fmt(a.get('penetration_bodies_time'))} s) | {fmt(a.get('penetration_ground_mm'))} "
+                         f"(at {fmt(a.get('penetration_ground_time'))} s) | {fmt(a.get('penetration_bodies_end_mm'))} / "
+                         f"{fmt(a.get('penetration_ground_end_mm'))} | {fmt(a.get('max_speed_end'))} | "
+                         f"{fmt(a.get('mean_speed_end'))} | {a.get('below_ground')} | {fmt(a.get('max_radius_end'))} | "
+                         f"{a.get('exploded')} |")
+        for x in payload.get("extras", []):
+            if x["scene"] != scene:
+                continue
+            entry = x["result"]
+            if "error" in entry:
+                lines.append(f"| {LABELS[x['engine']]}, {x['label']} | failed: {entry['error'][:80]} |" + " |" * 11)
+                continue
+            a = entry["accuracy"]
+            lines.append(f"| {LABELS[x['engine']]}, extra run | {entry['settings'].get('nonconvex_meshes', x['label'])} | 1 | "
+                         f"{fmt(entry['step_cpu_seconds'] / entry['simulated_seconds'])} | "
+                         f"{fmt(entry['wall_per_simulated_second'])} | {fmt(a.get('penetration_bodies_mm'))} "
+                         f"(at {fmt(a.get('penetration_bodies_time'))} s) | {fmt(a.get('penetration_ground_mm'))} "
+                         f"(at {fmt(a.get('penetration_ground_time'))} s) | {fmt(a.get('penetration_bodies_end_mm'))} / "
+                         f"{fmt(a.get('penetration_ground_end_mm'))} | {fmt(a.get('max_speed_end'))} | "
+                         f"{fmt(a.get('mean_speed_end'))} | {a.get('below_ground')} | {fmt(a.get('max_radius_end'))} | "
+                         f"{a.get('exploded')} |")
+        lines += ["", "Measured by scenes.py from each engine's poses of the meshes (the same code for every "
+                  "engine), against the true meshes of assets/meshes, whatever shapes the engine simulated: "
+                  + method + ". Resolution: each sample's depth is exact; the deepest point between samples can "
+                  "be missed by at most about the sample spacing's share of the overlap's slope (a sample within "
+                  "10 mm of every surface point). Speeds are of the centres of mass over the last frame. "
+                  "'CPU s / sim s' is the stepping's process CPU time (one thread, pinned) per simulated second.", ""]
 
     # simbake's stage profile
     prof = [(s, res["simbake"][s]) for s in payload["scenes"]
@@ -361,6 +425,8 @@ def main() -> None:
                          + "), one run each, no extras")
     ap.add_argument("--no-extras", action="store_true", help="skip the extra Blender settings runs")
     ap.add_argument("--timeout", type=float, default=1800.0, help="per run (s)")
+    ap.add_argument("--cpu", type=int, default=None,
+                    help="pin every run to this CPU (default: the last CPU this process may use)")
     ap.add_argument("--out", type=Path, default=RESULTS, help="directory of peers.{json,md,png}")
     ap.add_argument("--simbake-python", type=Path, default=ENGINES["simbake"][0],
                     help="interpreter with simbake installed (default: the project's .venv); e.g. one "
@@ -381,6 +447,8 @@ def main() -> None:
         print(write_chart(json_path, args.out / "peers.png"))
         return
     ENGINES["simbake"] = (args.simbake_python, ENGINES["simbake"][1])
+    global PIN_CPU
+    PIN_CPU = args.cpu
     args.seconds_map = {}
     for item in args.seconds:
         name, _, value = item.partition("=")
@@ -447,7 +515,8 @@ def main() -> None:
         "benchmark": "peers", "machine": machine_info(), "git": git_state(),
         "options": {"simbake_python": str(args.simbake_python), "engines": args.engines,
                     "scenes": args.scenes, "repeats": args.repeats, "slow": args.slow,
-                    "quick": args.quick, "seconds": args.seconds_map,
+                    "quick": args.quick, "seconds": args.seconds_map, "cpu": args.cpu,
+                    "command": " ".join(["python3", "benchmarks/peers/compare.py"] + sys.argv[1:]),
                     "simbake_pile_seconds": args.simbake_pile_seconds, "extras": not args.no_extras},
         "engines": args.engines, "scenes": [s for s in SCENE_ORDER if s in args.scenes],
         "versions": versions, "simbake_modules": modules,

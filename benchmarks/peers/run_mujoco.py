@@ -14,6 +14,15 @@ Settings (MuJoCo 4.0.0, Z up: scenes are converted from Y up):
   restitution is e: zeta = -ln e / sqrt(pi^2 + ln^2 e) = 0.2155 for e = 0.5, timeconst 0.02 s;
 - boxes and spheres as primitive geoms with the scene's mass (inertia from the shape);
   the ground is an infinite plane.
+- pile_meshes (nonconvex tori, L-shapes, spheres): MuJoCo collides a mesh geom as its convex
+  hull, so each nonconvex body is several convex mesh geoms, the way MuJoCo's documentation
+  asks for nonconvex shapes: scenes.py's exact decomposition (the torus's 32 tube segments,
+  the L's two boxes, the sphere whole), whose union is the mesh, never the hull of a whole
+  torus. The script checks it: the pieces' hull volumes (MuJoCo's own, inertia="convex")
+  add up to the mesh's volume. Each body's frame is its centre of mass and principal axes,
+  with an explicit <inertial> (mass from the mesh's volume and the density, the mesh's
+  principal moments); multi-point convex contacts (multiccd) are on, MuJoCo's default;
+  initial velocities in qvel (angular in the body frame). Arena memory 1 GB.
 Only mj_step is timed (the model is compiled before the clock starts).
 """
 
@@ -43,21 +52,60 @@ def damping_ratio_for_restitution(e: float) -> float:
     return -ln / math.sqrt(math.pi ** 2 + ln ** 2)
 
 
+def mesh_name(mesh: str) -> str:
+    return os.path.basename(mesh).rsplit(".", 1)[0]
+
+
+def decomposition_check(mesh: str) -> dict:
+    """MuJoCo's own volume of the pieces' hulls (unit density) against the mesh's volume."""
+    shape = scenes.mesh_shape(mesh)
+    assets = "".join(f'<mesh name="p{k}" vertex="{" ".join(f"{float(v):.17g}" for v in shape.principal(piece).ravel())}" '
+                     f'inertia="convex"/>' for k, piece in enumerate(shape.pieces))
+    geoms = "".join(f'<geom type="mesh" mesh="p{k}" density="1"/>' for k in range(len(shape.pieces)))
+    model = mujoco.MjModel.from_xml_string(f'<mujoco><asset>{assets}</asset><worldbody><body><freejoint/>'
+                                           f'{geoms}</body></worldbody></mujoco>')
+    return {"pieces": len(shape.pieces), "hull_volume_sum": float(model.body_mass[1]),
+            "mesh_volume": shape.volume, "ratio": float(model.body_mass[1]) / shape.volume}
+
+
 def model_xml(scene: scenes.Scene) -> tuple[str, dict]:
     mu = scenes.per_object(scene.mu, "max")
     zeta = damping_ratio_for_restitution(scene.e)
     solref = f"{TIMECONST} {zeta:.6f}"
     gx, gy, gz = scenes.vec_to_zup(scene.gravity)
     memory = max(16, 2 * len(scene.bodies) // 10 + 16)   # MB of the arena (contacts, solver)
+    meshes = sorted({b.mesh for b in scene.bodies if b.shape == "mesh"})
+    if meshes:
+        memory = 1024
     lines = [
         '<mujoco model="peer">',
         f'  <option timestep="{TIME_STEP!r}" gravity="{gx!r} {gy!r} {gz!r}"/>',
         f'  <size memory="{memory}M"/>',
         f'  <default><geom friction="{mu} 0.005 0.0001" condim="3" solref="{solref}"/></default>',
+    ]
+    if meshes:
+        lines.append("  <asset>")
+        for m in meshes:
+            shape = scenes.mesh_shape(m)
+            for k, piece in enumerate(shape.pieces):
+                pts = " ".join(f"{float(v):.17g}" for v in shape.principal(piece).ravel())
+                lines.append(f'    <mesh name="{mesh_name(m)}_{k}" vertex="{pts}" inertia="convex"/>')
+        lines.append("  </asset>")
+    lines += [
         '  <worldbody>',
         f'    <geom name="ground" type="plane" size="0 0 1" pos="0 0 {scene.ground_height!r}"/>',
     ]
     for i, b in enumerate(scene.bodies):
+        if b.shape == "mesh":
+            shape = scenes.mesh_shape(b.mesh)
+            com, q = scenes.principal_pose(b)
+            pos = " ".join(f"{float(v)!r}" for v in scenes.vec_to_zup(com))
+            quat = " ".join(f"{float(v)!r}" for v in scenes.quat_to_zup(q))
+            inertia = " ".join(f"{float(v)!r}" for v in b.density * shape.moments)
+            geoms = "".join(f'<geom type="mesh" mesh="{mesh_name(b.mesh)}_{k}"/>' for k in range(len(shape.pieces)))
+            lines.append(f'    <body name="b{i}" pos="{pos}" quat="{quat}"><freejoint/>'
+                         f'<inertial pos="0 0 0" mass="{b.mass!r}" diaginertia="{inertia}"/>{geoms}</body>')
+            continue
         pos = " ".join(repr(float(v)) for v in scenes.vec_to_zup(b.position))
         quat = " ".join(repr(float(v)) for v in scenes.quat_to_zup(b.orientation))
         if b.shape == "box":
@@ -75,6 +123,11 @@ def model_xml(scene: scenes.Scene) -> tuple[str, dict]:
                                                      if scene.e > 0 else "default (0.02 s, critically damped)"),
         "solimp": "default (0.9 0.95 0.001 0.5 2)", "arena_memory_mb": memory,
     }
+    if meshes:
+        settings["nonconvex_meshes"] = "several convex mesh geoms per body (scenes.py's exact decomposition)"
+        settings["decomposition_check"] = {mesh_name(m): decomposition_check(m) for m in meshes}
+        settings["inertia"] = "explicit <inertial>: mesh mass and principal moments"
+        settings["multiccd"] = "on (default)"
     return "\n".join(lines), settings
 
 
@@ -84,6 +137,14 @@ def main() -> None:
     xml, settings = model_xml(scene)
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
+    mesh_scene = any(b.shape == "mesh" for b in scene.bodies)
+    if mesh_scene:   # initial velocities: free joints take linear in the world, angular in the body
+        for i, b in enumerate(scene.bodies):
+            _, q = scenes.principal_pose(b)
+            R = scenes.quaternion_matrices(np.array(scenes.quat_to_zup(q)))
+            dof = model.jnt_dofadr[model.body_jntadr[i + 1]]
+            data.qvel[dof:dof + 3] = scenes.vec_to_zup(b.linear_velocity)
+            data.qvel[dof + 3:dof + 6] = R.T @ np.array(scenes.vec_to_zup(b.angular_velocity))
     mujoco.mj_forward(model, data)
 
     def centres():
@@ -91,6 +152,15 @@ def main() -> None:
 
     def turns():
         return scenes.orientations_from_zup(data.xquat[1:].copy())
+
+    if mesh_scene:   # principal frames -> the meshes' origins
+        principal_centres, principal_turns = centres, turns
+
+        def centres():
+            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[0]
+
+        def turns():
+            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[1]
 
     record = set(scene.recorded_frames())
     positions, orientations = [centres()], [turns()]

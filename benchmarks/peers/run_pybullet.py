@@ -14,6 +14,15 @@ Settings (PyBullet 3.2.7, DIRECT mode, Z up: scenes are converted from Y up):
   alive and swallows the bounce; the parameter is global to the process, so the stacking
   scenes keep the default that helps them stay still);
 - deactivation (sleeping) left as Bullet's default.
+- pile_meshes (nonconvex tori, L-shapes, spheres): a dynamic body in Bullet must be convex or
+  a compound of convex shapes (GEOM_MESH with indices is a static-only triangle mesh), so
+  each mesh is given as a compound of convex hulls, as PyBullet does for a V-HACD result: an
+  .obj with one object per convex piece, loaded with GEOM_MESH (PyBullet makes one
+  btConvexHullShape per object). The pieces are scenes.py's exact decomposition (the
+  torus's 32 tube segments, the L's two boxes, the sphere whole), whose union is the mesh:
+  no hull of a whole torus. Each body's frame is its centre of mass and principal axes;
+  mass from the mesh's volume and the density, inertia (localInertiaDiagonal) the mesh's
+  principal moments; initial linear and angular velocities set with resetBaseVelocity.
 Only the stepSimulation calls are timed.
 """
 
@@ -39,6 +48,27 @@ def xyzw(q_wxyz):
     return (x, y, z, w)
 
 
+def pieces_obj(mesh: str):
+    """The mesh's convex pieces (principal frame) as an .obj of one object each (faces: a fan
+    over each piece's points, enough for Bullet, which takes the hull of each object's points)."""
+    shape = scenes.mesh_shape(mesh)
+    scenes.PROBE_CACHE.mkdir(exist_ok=True)
+    path = scenes.PROBE_CACHE / f"pieces-{os.path.basename(mesh)[:-4]}-{shape.sha1}.obj"
+    lines, base = [], 1
+    for k, piece in enumerate(shape.pieces):
+        pts = shape.principal(piece)
+        lines.append(f"o piece{k}")
+        lines += [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in pts]
+        lines += [f"f {base} {base + i} {base + i + 1}" for i in range(1, len(pts) - 1)]
+        base += len(pts)
+    text = "\n".join(lines) + "\n"
+    if not path.exists() or path.read_text() != text:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    return path
+
+
 def build(scene: scenes.Scene, client: int) -> tuple[list, dict]:
     p.resetSimulation(physicsClientId=client)
     p.setGravity(*scenes.vec_to_zup(scene.gravity), physicsClientId=client)
@@ -54,7 +84,23 @@ def build(scene: scenes.Scene, client: int) -> tuple[list, dict]:
                      spinningFriction=0.0, physicsClientId=client)
     shapes, ids = {}, []
     for b in scene.bodies:
-        key = (b.shape, b.size)
+        key = (b.shape, b.size, b.mesh)
+        if b.shape == "mesh":
+            if key not in shapes:
+                shapes[key] = p.createCollisionShape(p.GEOM_MESH, fileName=str(pieces_obj(b.mesh)),
+                                                     physicsClientId=client)
+            shape = scenes.mesh_shape(b.mesh)
+            com, q = scenes.principal_pose(b)
+            body = p.createMultiBody(b.mass, shapes[key], -1, scenes.vec_to_zup(com),
+                                     xyzw(scenes.quat_to_zup(q)), physicsClientId=client)
+            p.changeDynamics(body, -1, lateralFriction=mu, restitution=e, rollingFriction=0.0,
+                             spinningFriction=0.0, linearDamping=0.0, angularDamping=0.0,
+                             localInertiaDiagonal=[float(v) for v in b.density * shape.moments],
+                             physicsClientId=client)
+            p.resetBaseVelocity(body, scenes.vec_to_zup(b.linear_velocity), scenes.vec_to_zup(b.angular_velocity),
+                                physicsClientId=client)
+            ids.append(body)
+            continue
         if key not in shapes:
             if b.shape == "box":
                 shapes[key] = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.5 * s for s in b.size],
@@ -67,7 +113,18 @@ def build(scene: scenes.Scene, client: int) -> tuple[list, dict]:
                          spinningFriction=0.0, linearDamping=0.0, angularDamping=0.0,
                          physicsClientId=client)
         ids.append(body)
+    mesh_settings = {}
+    if any(b.shape == "mesh" for b in scene.bodies):
+        mesh_settings = {"nonconvex_meshes": "compound of convex hulls (GEOM_MESH from an .obj of one object "
+                                             "per piece), scenes.py's exact decomposition",
+                         "pieces": {os.path.basename(m): len(scenes.mesh_shape(m).pieces)
+                                    for m in sorted({b.mesh for b in scene.bodies})},
+                         "children_per_shape": {os.path.basename(k[2]): len(p.getCollisionShapeData(
+                             ids[[b.mesh for b in scene.bodies].index(k[2])], -1, physicsClientId=client))
+                             for k in shapes},
+                         "inertia": "mesh principal moments x density (localInertiaDiagonal)"}
     settings = {
+        **mesh_settings,
         "time_step": TIME_STEP, "steps_per_frame": STEPS_PER_FRAME,
         "solver_iterations": params.get("numSolverIterations"),
         "contact_breaking_threshold": 0.005 if scene.name == "drop" else "default (0.02)",
@@ -91,6 +148,15 @@ def main() -> None:
     def turns():   # PyBullet's quaternions are [x, y, z, w]
         xyzw = np.array([p.getBasePositionAndOrientation(i, physicsClientId=client)[1] for i in ids])
         return scenes.orientations_from_zup(xyzw[:, [3, 0, 1, 2]])
+
+    if any(b.shape == "mesh" for b in scene.bodies):   # principal frames -> the meshes' origins
+        principal_centres, principal_turns = centres, turns
+
+        def centres():
+            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[0]
+
+        def turns():
+            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[1]
 
     record = set(scene.recorded_frames())
     positions, orientations = [centres()], [turns()]

@@ -9,6 +9,13 @@ shock propagation), every body with the scene's mu and e (the core combines
 friction by geometric mean and restitution by max, so the pair gets exactly mu and e).
 Boxes: LevelSet.box and box_mesh(size, 4) samples; spheres: LevelSet.sphere and
 sphere_mesh(r, 8) samples (as the pipeline's primitives). Only World.step_frame is timed.
+
+pile_meshes (assets/scenes/pile.toml): the world is built by the pipeline itself, exactly as
+`simbake bake assets/scenes/pile.toml` builds it (simbake.scene.load_scene, simbake.assets.
+load_assets: each mesh's level set at its automatic voxel size, its surface samples and its
+mass properties; simbake.simulate.build_world), with threads=1, stepped with the scene's
+[solver] substeps (0: automatic) as the bake does. The script checks that the pipeline's
+scene is the benchmark's (every body's mesh, pose, velocities, density, friction).
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import datetime
 import hashlib
 import json
+import math
 import os
 import sys
 
@@ -53,17 +61,41 @@ def build_world(scene: scenes.Scene, **settings) -> "_core.World":
     return world
 
 
+def pipeline_world(scene: scenes.Scene):
+    """The world `simbake bake` builds for the scene file (one thread), and the file's
+    [solver] substeps; checks that the file is the benchmark's scene."""
+    from simbake.assets import load_assets
+    from simbake.scene import load_scene
+    from simbake.simulate import build_world as bake_world
+
+    sim = load_scene(scenes.ROOT / scenes.MESH_PILE)
+    assert len(sim.bodies) == len(scene.bodies), "body count"
+    for a, b in zip(sim.bodies, scene.bodies):
+        assert a.shape.kind == "mesh" and a.shape.mesh_path == (scenes.ROOT / b.mesh).resolve(), a.name
+        assert (tuple(a.position), tuple(a.orientation), a.density, tuple(a.linear_velocity),
+                tuple(a.angular_velocity)) == (b.position, b.orientation, b.density, b.linear_velocity,
+                                                b.angular_velocity), a.name
+        assert math.sqrt(a.friction * sim.ground.friction) == scene.mu and not a.kinematic, a.name
+    assert tuple(sim.gravity) == scene.gravity and sim.ground.height == scene.ground_height
+    assert (sim.end_frame - sim.start_frame) / sim.fps == scene.frames / scenes.FPS or scene.notes
+    return bake_world(sim, load_assets(sim), threads=1), sim.substeps
+
+
 def main() -> None:
     args = scenes.common_args()
     scene = scenes.build(args.scene, args.seconds)
-    world = build_world(scene)
+    mesh_scene = any(b.shape == "mesh" for b in scene.bodies)
+    if mesh_scene:
+        world, scene_substeps = pipeline_world(scene)
+    else:
+        world, scene_substeps = build_world(scene), 0
     record = set(scene.recorded_frames())
     positions, orientations = [world.mesh_poses()[0].copy()], [world.mesh_poses()[1].copy()]  # centred meshes
     clock = scenes.StepClock()
     substeps = []
     for frame in range(1, scene.frames + 1):
         with clock:
-            substeps.append(world.step_frame(1.0 / scenes.FPS, 0))
+            substeps.append(world.step_frame(1.0 / scenes.FPS, scene_substeps))
         if frame in record:
             translation, orientation = world.mesh_poses()
             positions.append(translation.copy())
@@ -79,6 +111,17 @@ def main() -> None:
         "combine": "friction sqrt(a b), restitution max(a, b)",
         "box_samples": f"box_mesh(size, {BOX_SUBDIVISIONS})", "sphere_samples": f"sphere_mesh(r, {SPHERE_SUBDIVISIONS})",
     }
+    if mesh_scene:
+        settings = {
+            "world": f"the pipeline's: load_scene({scenes.MESH_PILE}) + load_assets + simulate.build_world(threads=1)",
+            "substeps": f"step_frame(1/24, {scene_substeps}) ({'automatic' if scene_substeps == 0 else 'the scene file'})",
+            "substeps_per_frame_mean": float(np.mean(substeps)),
+            "substeps_per_frame_max": int(max(substeps)),
+            "friction": "per body 0.5 (simbake's default), ground 0.5: every pair sqrt(a b) = 0.5",
+            "nonconvex_meshes": "level set of each mesh (automatic voxel size) + its surface samples; "
+                                "mass properties of the closed mesh",
+            "threads": 1,
+        }
     with open(_core.__file__, "rb") as f:
         core_sha1 = hashlib.sha1(f.read()).hexdigest()[:12]
     extra = {"core_module": {"path": _core.__file__, "sha1": core_sha1,
