@@ -188,6 +188,13 @@ double thread_cpu_seconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
+// start + (A x) at block row i, A in 3x3 blocks (summed onto `start`, in block order)
+Vec3 block_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& x, int i, Vec3 start = Vec3::Zero()) {
+  Vec3 q = start;
+  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block[k] * x.segment<3>(3 * a.column[k]);
+  return q;
+}
+
 // Constrained blocks of the implicit system: block `block`'s component along the unit
 // `normal` is fixed (Baraff and Witkin's filter S = I - n n^T there, the identity elsewhere)
 struct Filter {
@@ -208,11 +215,12 @@ void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
   }
 }
 
-// Preconditioned conjugate gradients on the system p was last updated with (p.matrix(), its
-// upper triangle, multiplied in 3x3 blocks), until |b - A z| < tolerance |b| or
-// kMaxSolverIterations; returns the iterations, counted as Eigen's ConjugateGradient counts
-// them (the products after the first). The update of z and r is fused with the residual's
-// norm; everything runs in a fixed order, so the result has the same bits on any thread.
+// Preconditioned conjugate gradients on the system p was last updated with (p.matrix(),
+// multiplied in 3x3 blocks), until |b - A z| < tolerance |b| or kMaxSolverIterations;
+// returns the iterations, counted as Eigen's ConjugateGradient counts them (the products
+// after the first). The vector operations of each iteration are fused into two passes (the
+// product with the step's dot product, the update with the residual's norm); everything
+// runs in a fixed order, so the result has the same bits on any thread.
 // With constrained blocks (Baraff and Witkin's modified PCG), z starts from its fixed
 // components (z's own values there along each normal, or all three where fixed in full; the
 // rest is ignored) and every search direction and residual is filtered, so those components stay as they are and the rest
@@ -222,7 +230,8 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
                         Eigen::VectorXd& z, const std::vector<Filter>& filter) {
   const cloth_detail::BlockMatrix& a = p.matrix();
   const Eigen::Index size = b.size();
-  Eigen::VectorXd r = b, product(size);
+  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return block_row_product(a, x, i); };
+  Eigen::VectorXd r = b;
   if (filter.empty()) {
     z.setZero(size);
   } else {
@@ -231,23 +240,25 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
       fixed.segment<3>(3 * f.block) = f.full ? Vec3(z.segment<3>(3 * f.block)) : Vec3(f.normal * f.normal.dot(z.segment<3>(3 * f.block)));
     }
     z = fixed;
-    cloth_detail::symmetric_product(a, z, product);
-    r -= product;
+    for (int i = 0; i < a.size; ++i) r.segment<3>(3 * i) -= multiply(z, i);
     apply_filter(filter, r);
   }
   Eigen::VectorXd filtered_b = b;
   apply_filter(filter, filtered_b);
   const double goal = tolerance * tolerance * std::max(filtered_b.squaredNorm(), r.squaredNorm());
   if (goal == 0.0) return 0;
-  Eigen::VectorXd direction, s;
+  Eigen::VectorXd direction, product(size), s;
   p.apply(r, direction);
   apply_filter(filter, direction);
   double rs = r.dot(direction);
   for (int iteration = 0; iteration < kMaxSolverIterations; ++iteration) {
-    // q = A d, read from A's upper triangle (half the memory traffic), and d . q (d is
-    // filtered, so d . S q = d . q)
-    cloth_detail::symmetric_product(a, direction, product);
-    const double dq = product.dot(direction);
+    // q = A d and d . q in one pass over the blocks (d is filtered, so d . S q = d . q)
+    double dq = 0.0;
+    for (int i = 0; i < a.size; ++i) {
+      const Vec3 q = multiply(direction, i);
+      product.segment<3>(3 * i) = q;
+      dq += q.dot(direction.segment<3>(3 * i));
+    }
     apply_filter(filter, product);
     const double alpha = rs / dq;
     double r2 = 0.0;
@@ -273,6 +284,13 @@ Vec3 constrained_velocity(const ClothContactConstraint& c, const Vec3& v) {
   const Vec3 across = c.stick ? Vec3(c.surface_velocity - c.normal * c.normal.dot(c.surface_velocity))
                               : Vec3(v - c.normal * c.normal.dot(v));
   return across + c.speed * c.normal;
+}
+
+// (A z - b) at block i: the force the constraints add there (zero off the constrained
+// directions once converged)
+Vec3 constraint_residual(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& b, const Eigen::VectorXd& z,
+                         int i) {
+  return block_row_product(a, z, i, -b.segment<3>(3 * i));
 }
 
 // The length an edge of rest length `rest` must have when its candidate length is `length`:
@@ -510,13 +528,10 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
     // the surfaces' impulses: (A dv - b) in the held directions, unscaled (A dv - b =
     // M^1/2 (A_s z - b_s)), A without the stiffness added for the preconditioner
     std::vector<Vec3> impulse(free_count_, Vec3::Zero());
-    Eigen::VectorXd residual;  // A z - b, the force the constraints add (zero off the held directions once converged)
-    cloth_detail::symmetric_product(preconditioner_->matrix(), z, residual);
-    residual -= rhs;
     for (size_t f = 0; f < filter.size(); ++f) {
       const int i = filter[f].block;
       const Mat3 held = filter[f].held();
-      impulse[i] = (held * residual.segment<3>(3 * i) -
+      impulse[i] = (held * constraint_residual(preconditioner_->matrix(), rhs, z, i) -
                     stiffness[f] * held * z.segment<3>(3 * i)) / scale[3 * i];
     }
     for (ClothContactConstraint& c : *constraints) {

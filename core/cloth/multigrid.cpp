@@ -213,38 +213,6 @@ BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern) {
   return m;
 }
 
-BlockMatrix upper_triangle(const BlockMatrix& full) {
-  std::vector<std::vector<int>> rows(full.size);
-  std::vector<int> source, stride;
-  for (int i = 0; i < full.size; ++i) {
-    for (int k = full.diagonal[i]; k < full.start[i + 1]; ++k) {
-      rows[i].push_back(full.column[k]);
-      if (!full.source.empty()) {
-        source.push_back(full.source[k]);
-        stride.push_back(full.stride[k]);
-      }
-    }
-  }
-  BlockMatrix m = block_pattern(rows);
-  m.source = std::move(source);
-  m.stride = std::move(stride);
-  return m;
-}
-
-void symmetric_product(const BlockMatrix& upper, const Eigen::VectorXd& x, Eigen::VectorXd& y) {
-  y.setZero(x.size());
-  for (int i = 0; i < upper.size; ++i) {
-    const Vec3 xi = at(x, i);
-    Vec3 s = upper.block[upper.start[i]] * xi;
-    for (int k = upper.start[i] + 1; k < upper.start[i + 1]; ++k) {
-      const int j = upper.column[k];
-      s.noalias() += upper.block[k] * at(x, j);
-      at(y, j).noalias() += upper.block[k].transpose() * xi;
-    }
-    at(y, i) += s;
-  }
-}
-
 void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
   const double* values = a.valuePtr();
   for (size_t k = 0; k < m.block.size(); ++k) {
@@ -260,7 +228,9 @@ void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
 // ---- block-Jacobi
 
 void BlockJacobi::update(const Eigen::SparseMatrix<double>& a) {
-  if (matrix_.size != a.cols() / 3 || matrix_.source.empty()) matrix_ = upper_triangle(block_matrix(a));
+  if (matrix_.size != a.cols() / 3 || matrix_.block.size() * 9 != static_cast<size_t>(a.nonZeros())) {
+    matrix_ = block_matrix(a);
+  }
   copy_values(a, matrix_);
   invert_diagonal(matrix_, inverse_);
 }
@@ -276,18 +246,7 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
                      const Eigen::VectorXd& scale) {
   const int n = static_cast<int>(pattern.cols() / 3);
   if (static_cast<int>(edges.size()) != n || scale.size() != n) throw std::invalid_argument("multigrid: one edge list and scale per block");
-  // the conjugate gradients' matrix is the upper triangle; the V-cycle's sweeps read whole rows
   matrix_.push_back(block_matrix(pattern));
-  system_ = upper_triangle(matrix_[0]);
-  fine_entry_.assign(system_.column.size(), -1);
-  fine_transposed_.assign(system_.column.size(), -1);
-  for (int i = 0; i < n; ++i) {
-    for (int k = system_.start[i]; k < system_.start[i + 1]; ++k) {
-      const int j = system_.column[k];
-      fine_entry_[k] = entry(matrix_[0], i, j);
-      if (j != i) fine_transposed_[k] = entry(matrix_[0], j, i);
-    }
-  }
   Graph graph = edges;
   for (std::vector<int>& row : graph) {
     std::sort(row.begin(), row.end());
@@ -382,12 +341,7 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
 // ---- multigrid: the values (every step)
 
 void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
-  copy_values(a, system_);
-  BlockMatrix& fine = matrix_[0];
-  for (size_t k = 0; k < system_.block.size(); ++k) {
-    fine.block[fine_entry_[k]] = system_.block[k];
-    if (fine_transposed_[k] >= 0) fine.block[fine_transposed_[k]] = system_.block[k].transpose();
-  }
+  copy_values(a, matrix_[0]);
   // Galerkin products level by level: B = A P, then A_(l+1) = P^T B
   for (size_t l = 0; l + 1 < matrix_.size(); ++l) {
     BlockMatrix& b = product_[l];

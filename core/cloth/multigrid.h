@@ -47,12 +47,6 @@ struct BlockMatrix {
 BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern);
 // m's values from a matrix of the pattern m was made from
 void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m);
-// The upper triangle of a full block matrix (blocks (i, j >= i); each row's diagonal block
-// first), with the positions copy_values reads: half the memory of a symmetric matrix, which
-// is what a product with it costs once the matrix no longer fits in the cache
-BlockMatrix upper_triangle(const BlockMatrix& full);
-// y = A x for A given by its upper triangle (A_ji = A_ij^T), in a fixed order
-void symmetric_product(const BlockMatrix& upper, const Eigen::VectorXd& x, Eigen::VectorXd& y);
 
 class Preconditioner {
  public:
@@ -62,8 +56,7 @@ class Preconditioner {
   virtual void update(const Eigen::SparseMatrix<double>& a) = 0;
   // z = P^-1 r (r and z of the matrix's size; z is overwritten)
   virtual void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const = 0;
-  // the matrix of the last update(), its upper triangle in 3x3 blocks (what the conjugate
-  // gradients multiply by, with symmetric_product)
+  // the matrix of the last update(), in 3x3 blocks (what the conjugate gradients multiply by)
   virtual const BlockMatrix& matrix() const = 0;
   // a copy with its own scratch (Cloth copies share one until they solve)
   virtual std::unique_ptr<Preconditioner> clone() const = 0;
@@ -78,7 +71,7 @@ class BlockJacobi final : public Preconditioner {
   std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<BlockJacobi>(*this); }
 
  private:
-  BlockMatrix matrix_;                                          // the system's upper triangle (its pattern from the first update)
+  BlockMatrix matrix_;                                          // the system (its pattern from the first update)
   std::vector<Mat3, Eigen::aligned_allocator<Mat3>> inverse_;  // (blocks) inverses of the diagonal blocks
 };
 
@@ -103,7 +96,7 @@ class Multigrid final : public Preconditioner {
 
   void update(const Eigen::SparseMatrix<double>& a) override;
   void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const override;
-  const BlockMatrix& matrix() const override { return system_; }
+  const BlockMatrix& matrix() const override { return matrix_[0]; }
   std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<Multigrid>(*this); }
 
   int levels() const { return static_cast<int>(matrix_.size()); }
@@ -115,9 +108,6 @@ class Multigrid final : public Preconditioner {
     std::vector<int> from, to;
     std::vector<double> weight;
   };
-  BlockMatrix system_;                        // the system's upper triangle (what the conjugate gradients multiply by)
-  // (system_'s entries) where each of its blocks goes in the finest level: (i, j) and (j, i)
-  std::vector<int> fine_entry_, fine_transposed_;
   std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
   std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
   std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l
