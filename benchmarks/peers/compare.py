@@ -234,6 +234,17 @@ def cell(entry: dict | None, capped_note: str = "", repeats: int = 3) -> str:
     return f"{fmt(entry['wall_per_simulated_second'])}{capped_note}{runs}; {entry['summary']}"
 
 
+
+def mesh_pile_row(label: str, shape: str, runs, cpu, entry: dict) -> str:
+    """One row of the mesh pile's table: an engine's run (or median entry) and its accuracy."""
+    a = entry["accuracy"]
+    return (f"| {label} | {shape} | {runs} | {fmt(cpu)} | {fmt(entry['wall_per_simulated_second'])} | "
+            f"{fmt(a.get('penetration_bodies_mm'))} (at {fmt(a.get('penetration_bodies_time'))} s) | "
+            f"{fmt(a.get('penetration_ground_mm'))} (at {fmt(a.get('penetration_ground_time'))} s) | "
+            f"{fmt(a.get('penetration_bodies_end_mm'))} / {fmt(a.get('penetration_ground_end_mm'))} | "
+            f"{fmt(a.get('max_speed_end'))} | {fmt(a.get('mean_speed_end'))} | {a.get('below_ground')} | "
+            f"{fmt(a.get('max_radius_end'))} | {a.get('exploded')} |")
+
 def write_markdown(payload: dict, path: Path) -> None:
     res, engines = payload["results"], payload["engines"]
     info, lines = payload["machine"], []
@@ -316,15 +327,8 @@ def write_markdown(payload: dict, path: Path) -> None:
             if "error" in entry:
                 lines.append(f"| {LABELS[e]} | failed: {entry['error'][:80]} |" + " |" * 11)
                 continue
-            a, st = entry["accuracy"], entry["settings"]
-            shape = st.get("nonconvex_meshes", "")
-            lines.append(f"| {LABELS[e]} | {shape} | {entry['runs']} | {fmt(entry.get('cpu_per_simulated_second'))} | "
-                         f"{fmt(entry['wall_per_simulated_second'])} | {fmt(a.get('penetration_bodies_mm'))} "
-                         f"(at {fmt(a.get('penetration_bodies_time'))} s) | {fmt(a.get('penetration_ground_mm'))} "
-                         f"(at {fmt(a.get('penetration_ground_time'))} s) | {fmt(a.get('penetration_bodies_end_mm'))} / "
-                         f"{fmt(a.get('penetration_ground_end_mm'))} | {fmt(a.get('max_speed_end'))} | "
-                         f"{fmt(a.get('mean_speed_end'))} | {a.get('below_ground')} | {fmt(a.get('max_radius_end'))} | "
-                         f"{a.get('exploded')} |")
+            lines.append(mesh_pile_row(LABELS[e], entry["settings"].get("nonconvex_meshes", ""), entry["runs"],
+                                       entry.get("cpu_per_simulated_second"), entry))
         for x in payload.get("extras", []):
             if x["scene"] != scene:
                 continue
@@ -332,15 +336,9 @@ def write_markdown(payload: dict, path: Path) -> None:
             if "error" in entry:
                 lines.append(f"| {LABELS[x['engine']]}, {x['label']} | failed: {entry['error'][:80]} |" + " |" * 11)
                 continue
-            a = entry["accuracy"]
-            lines.append(f"| {LABELS[x['engine']]}, extra run | {entry['settings'].get('nonconvex_meshes', x['label'])} | 1 | "
-                         f"{fmt(entry['step_cpu_seconds'] / entry['simulated_seconds'])} | "
-                         f"{fmt(entry['wall_per_simulated_second'])} | {fmt(a.get('penetration_bodies_mm'))} "
-                         f"(at {fmt(a.get('penetration_bodies_time'))} s) | {fmt(a.get('penetration_ground_mm'))} "
-                         f"(at {fmt(a.get('penetration_ground_time'))} s) | {fmt(a.get('penetration_bodies_end_mm'))} / "
-                         f"{fmt(a.get('penetration_ground_end_mm'))} | {fmt(a.get('max_speed_end'))} | "
-                         f"{fmt(a.get('mean_speed_end'))} | {a.get('below_ground')} | {fmt(a.get('max_radius_end'))} | "
-                         f"{a.get('exploded')} |")
+            lines.append(mesh_pile_row(f"{LABELS[x['engine']]}, extra run",
+                                       entry["settings"].get("nonconvex_meshes", x["label"]), 1,
+                                       entry["step_cpu_seconds"] / entry["simulated_seconds"], entry))
         lines += ["", "Measured by scenes.py from each engine's poses of the meshes (the same code for every "
                   "engine), against the true meshes of assets/meshes, whatever shapes the engine simulated: "
                   + method + ". Resolution: each sample's depth is exact; the deepest point between samples can "

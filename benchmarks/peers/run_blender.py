@@ -86,8 +86,10 @@ def mesh_from(name: str, vertices, triangles=None) -> "bpy.types.Mesh":
     return me
 
 
-def build_meshes(scene: scenes.Scene, substeps: int, mesh_shape: str):
-    """pile_meshes: objects with the true meshes (principal frames), COMPOUND or MESH shapes."""
+def new_world(scene: scenes.Scene, substeps: int):
+    """An empty Blender scene with a rigid body world (substeps per frame, the scene's frames,
+    gravity) and the ground box; the per-object friction and restitution giving each pair
+    the scene's mu and e. Returns (scene, rigid body world, mu, e, ground)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
     sc.render.fps, sc.render.fps_base = scenes.FPS, 1.0
@@ -104,6 +106,12 @@ def build_meshes(scene: scenes.Scene, substeps: int, mesh_shape: str):
     ground = bpy.data.objects.new("ground", make_mesh("ground", "box", (200.0, 200.0, 2.0)))
     sc.collection.objects.link(ground)
     ground.location = (0.0, 0.0, scene.ground_height - 1.0)
+    return sc, rbw, mu, e, ground
+
+
+def build_meshes(scene: scenes.Scene, substeps: int, mesh_shape: str):
+    """pile_meshes: objects with the true meshes (principal frames), COMPOUND or MESH shapes."""
+    sc, rbw, mu, e, ground = new_world(scene, substeps)
 
     whole, pieces = {}, {}
     for m in sorted({b.mesh for b in scene.bodies}):
@@ -175,23 +183,7 @@ def build_meshes(scene: scenes.Scene, substeps: int, mesh_shape: str):
 
 
 def build(scene: scenes.Scene, substeps: int, damping: bool = False):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.fps, sc.render.fps_base = scenes.FPS, 1.0
-    sc.use_gravity = True
-    sc.gravity = scenes.vec_to_zup(scene.gravity)
-    bpy.ops.rigidbody.world_add()
-    rbw = sc.rigidbody_world
-    rbw.substeps_per_frame = substeps
-    rbw.time_scale = 1.0
-    sc.frame_start, sc.frame_end = 1, scene.frames + 1
-    rbw.point_cache.frame_start, rbw.point_cache.frame_end = 1, scene.frames + 1
-
-    mu = scenes.per_object(scene.mu, "product")
-    e = scenes.per_object(scene.e, "product") if scene.e > 0 else 0.0
-    ground = bpy.data.objects.new("ground", make_mesh("ground", "box", (200.0, 200.0, 2.0)))
-    sc.collection.objects.link(ground)
-    ground.location = (0.0, 0.0, scene.ground_height - 1.0)
+    sc, rbw, mu, e, ground = new_world(scene, substeps)
 
     meshes, objects = {}, []
     for i, b in enumerate(scene.bodies):
@@ -268,13 +260,7 @@ def main() -> None:
         return scenes.orientations_from_zup([tuple(o.matrix_world.decompose()[1]) for o in objects])
 
     if mesh_scene:   # principal frames -> the meshes' origins
-        principal_centres, principal_turns = centres, turns
-
-        def centres():
-            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[0]
-
-        def turns():
-            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[1]
+        centres, turns = scenes.origin_pose_readers(scene, centres, turns)
 
     record = set(scene.recorded_frames())
     positions, orientations = [centres()], [turns()]

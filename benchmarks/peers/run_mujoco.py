@@ -154,13 +154,7 @@ def main() -> None:
         return scenes.orientations_from_zup(data.xquat[1:].copy())
 
     if mesh_scene:   # principal frames -> the meshes' origins
-        principal_centres, principal_turns = centres, turns
-
-        def centres():
-            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[0]
-
-        def turns():
-            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[1]
+        centres, turns = scenes.origin_pose_readers(scene, centres, turns)
 
     record = set(scene.recorded_frames())
     positions, orientations = [centres()], [turns()]

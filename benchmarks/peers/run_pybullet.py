@@ -150,13 +150,7 @@ def main() -> None:
         return scenes.orientations_from_zup(xyzw[:, [3, 0, 1, 2]])
 
     if any(b.shape == "mesh" for b in scene.bodies):   # principal frames -> the meshes' origins
-        principal_centres, principal_turns = centres, turns
-
-        def centres():
-            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[0]
-
-        def turns():
-            return scenes.mesh_origin_poses(scene, principal_centres(), principal_turns())[1]
+        centres, turns = scenes.origin_pose_readers(scene, centres, turns)
 
     record = set(scene.recorded_frames())
     positions, orientations = [centres()], [turns()]

@@ -586,6 +586,13 @@ def mesh_origin_poses(scene: Scene, com: np.ndarray, q: np.ndarray) -> tuple:
     return origin, q_mesh
 
 
+def origin_pose_readers(scene: Scene, centres, turns) -> tuple:
+    """An engine's readers of its bodies' principal-frame centres and turns -> readers of the
+    meshes' origins and turns (mesh_origin_poses), as every engine hands them to analyze."""
+    return (lambda: mesh_origin_poses(scene, centres(), turns())[0],
+            lambda: mesh_origin_poses(scene, centres(), turns())[1])
+
+
 # ---------------------------------------------------------------------------------------
 # penetration of meshes, measured exactly from the true meshes
 
