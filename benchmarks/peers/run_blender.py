@@ -109,6 +109,19 @@ def new_world(scene: scenes.Scene, substeps: int):
     return sc, rbw, mu, e, ground
 
 
+def add_rigid_bodies(sc, active, ground) -> None:
+    """Every object of the scene but the ground an active rigid body, the ground a passive one:
+    one operator call per type over the selection (per-object operators are slow)."""
+    for obj in sc.objects:
+        obj.select_set(obj is not ground)
+    bpy.context.view_layer.objects.active = active
+    bpy.ops.rigidbody.objects_add(type="ACTIVE")
+    for obj in sc.objects:
+        obj.select_set(obj is ground)
+    bpy.context.view_layer.objects.active = ground
+    bpy.ops.rigidbody.objects_add(type="PASSIVE")
+
+
 def build_meshes(scene: scenes.Scene, substeps: int, mesh_shape: str):
     """pile_meshes: objects with the true meshes (principal frames), COMPOUND or MESH shapes."""
     sc, rbw, mu, e, ground = new_world(scene, substeps)
@@ -134,14 +147,7 @@ def build_meshes(scene: scenes.Scene, substeps: int, mesh_shape: str):
                 sc.collection.objects.link(child)
                 child.parent = obj          # identity parent inverse: the child sits in obj's frame
                 children.append(child)
-    for obj in sc.objects:
-        obj.select_set(obj is not ground)
-    bpy.context.view_layer.objects.active = objects[0]
-    bpy.ops.rigidbody.objects_add(type="ACTIVE")
-    for obj in sc.objects:
-        obj.select_set(obj is ground)
-    bpy.context.view_layer.objects.active = ground
-    bpy.ops.rigidbody.objects_add(type="PASSIVE")
+    add_rigid_bodies(sc, objects[0], ground)
     for obj, b in zip(objects, scene.bodies):
         rb = obj.rigid_body
         rb.collision_shape = mesh_shape
@@ -197,15 +203,7 @@ def build(scene: scenes.Scene, substeps: int, damping: bool = False):
         obj.rotation_quaternion = scenes.quat_to_zup(b.orientation)
         objects.append(obj)
 
-    # one operator call per type over the selection (per-object operators are slow)
-    for obj in sc.objects:
-        obj.select_set(obj is not ground)
-    bpy.context.view_layer.objects.active = objects[0]
-    bpy.ops.rigidbody.objects_add(type="ACTIVE")
-    for obj in sc.objects:
-        obj.select_set(obj is ground)
-    bpy.context.view_layer.objects.active = ground
-    bpy.ops.rigidbody.objects_add(type="PASSIVE")
+    add_rigid_bodies(sc, objects[0], ground)
 
     for obj, b in zip(objects, scene.bodies):
         rb = obj.rigid_body
