@@ -900,6 +900,24 @@ def _parabola_vertex(t, y):
     return float(c[2] - c[1] * c[1] / (4.0 * c[0]))
 
 
+def _pile_end(scene: Scene, last_two: np.ndarray, half: float) -> dict:
+    """How a pile ended, from its bodies' centres of mass at the last two recorded frames
+    (2, n, 3): speeds over the last frame, centres under the ground (fell through), heights,
+    and whether it exploded: nothing may fall faster than from the highest start, nor rise
+    above it (`half`: how far a centre sits above the bottom it falls on; 0 for meshes)."""
+    speed = np.linalg.norm(last_two[1] - last_two[0], axis=-1) * FPS
+    end = last_two[1]
+    top = max(b.position[1] for b in scene.bodies)
+    out = {"max_speed_end": float(speed.max()), "mean_speed_end": float(speed.mean()),
+           "below_ground": int((end[:, 1] < scene.ground_height).sum()),
+           "min_height_end": float(end[:, 1].min()), "max_height_end": float(end[:, 1].max()),
+           "max_radius_end": float(np.hypot(end[:, 0], end[:, 2]).max()),
+           "free_fall_speed_limit": math.sqrt(2.0 * G * (top - half - scene.ground_height))}
+    out["exploded"] = bool(out["below_ground"] > 0 or out["max_speed_end"] > out["free_fall_speed_limit"]
+                           or out["max_height_end"] > top + half)
+    return out
+
+
 def analyze(scene: Scene, positions: np.ndarray, orientations: np.ndarray | None = None) -> dict:
     """Accuracy of a run from the recorded centres (len(recorded_frames()), n, 3), Y up, and
     for scenes of boxes from the orientations too ((frames, n, 4), [w, x, y, z], Y up): the
@@ -922,17 +940,7 @@ def analyze(scene: Scene, positions: np.ndarray, orientations: np.ndarray | None
         out.update(mesh_penetration(scene, p, q))
         centres = np.array([mesh_shape(b.mesh).centre for b in scene.bodies])
         com_end = p[-2:] + np.einsum("fnij,nj->fni", quaternion_matrices(q[-2:]), centres)
-        speed = np.linalg.norm(com_end[1] - com_end[0], axis=-1) * FPS   # over the last frame
-        out["max_speed_end"] = float(speed.max())
-        out["mean_speed_end"] = float(speed.mean())
-        out["below_ground"] = int((com_end[1, :, 1] < scene.ground_height).sum())   # fell through
-        out["min_height_end"] = float(com_end[1, :, 1].min())
-        out["max_height_end"] = float(com_end[1, :, 1].max())
-        out["max_radius_end"] = float(np.hypot(com_end[1, :, 0], com_end[1, :, 2]).max())
-        top = max(b.position[1] for b in scene.bodies)
-        out["free_fall_speed_limit"] = math.sqrt(2.0 * G * (top - scene.ground_height))
-        out["exploded"] = bool(out["below_ground"] > 0 or out["max_speed_end"] > out["free_fall_speed_limit"]
-                               or out["max_height_end"] > top)
+        out.update(_pile_end(scene, com_end, 0.0))
     elif scene.name in ("tower", "pyramid"):
         out["drift_mm"] = 1000.0 * float(displacement.max())     # largest, any box, any frame
         out["drift_end_mm"] = 1000.0 * float(displacement[-1].max())
@@ -940,20 +948,9 @@ def analyze(scene: Scene, positions: np.ndarray, orientations: np.ndarray | None
         out["drift_worst_box"] = int(worst[1])
         out["drift_worst_time"] = float(t[worst[0]])
     elif scene.name.startswith("pile"):
-        speed = np.linalg.norm(p[-1] - p[-2], axis=-1) * FPS     # over the last frame
         half = 0.5 * scene.bodies[0].size[0]
-        out["max_speed_end"] = float(speed.max())
-        out["mean_speed_end"] = float(speed.mean())
-        out["below_ground"] = int((p[-1, :, 1] < scene.ground_height).sum())   # centre under the plane
+        out.update(_pile_end(scene, p[-2:], half))
         out["sunk_half"] = int((p[-1, :, 1] < scene.ground_height + 0.5 * half).sum())
-        out["min_height_end"] = float(p[-1, :, 1].min())
-        out["max_height_end"] = float(p[-1, :, 1].max())
-        out["max_radius_end"] = float(np.hypot(p[-1, :, 0], p[-1, :, 2]).max())
-        # nothing may fall faster than from the highest start, nor rise above it
-        top = max(b.position[1] for b in scene.bodies)
-        out["free_fall_speed_limit"] = math.sqrt(2.0 * G * (top - half - scene.ground_height))
-        out["exploded"] = bool(out["below_ground"] > 0 or out["max_speed_end"] > out["free_fall_speed_limit"]
-                               or out["max_height_end"] > top + half)
     elif scene.name == "drop":
         r = scene.bodies[0].radius
         h = p[:, 0, 1] - r - scene.ground_height                 # bottom height
