@@ -36,7 +36,8 @@ from simbake import _core  # noqa: E402
 
 def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: str,
           preconditioner: str = "automatic", self_collision: bool = True,
-          contacts_in_solve: bool = True) -> "_core.World":
+          contacts_in_solve: bool = True, stretch: float = spec.STRETCH,
+          strain_limit: float = 0.1) -> "_core.World":
     world = _core.World(gravity=np.array([0.0, -spec.GRAVITY, 0.0]), threads=1, cloth_max_substep=cloth_step,
                         cloth_contacts_in_solve=contacts_in_solve)
     world.set_ground(spec.GROUND, 0.5, 0.0)
@@ -46,8 +47,8 @@ def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: s
                    np.array(spec.SPHERE_CENTER), np.array([1.0, 0.0, 0.0, 0.0]), friction=0.5, kinematic=True)
     vertices, triangles = spec.grid(n)
     world.add_cloth(vertices, triangles, area_density=spec.AREA_DENSITY, model=model,
-                    stretch_stiffness=spec.STRETCH, bend_stiffness=spec.BEND, damping=0.01,
-                    strain_limit=0.1, integrator=integrator, friction=spec.FRICTION,
+                    stretch_stiffness=stretch, bend_stiffness=spec.BEND, damping=0.01,
+                    strain_limit=strain_limit, integrator=integrator, friction=spec.FRICTION,
                     thickness=spec.THICKNESS, tolerance=tolerance, preconditioner=preconditioner,
                     self_collision=self_collision)
     return world

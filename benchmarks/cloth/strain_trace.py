@@ -21,20 +21,13 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import drape_spec as spec  # noqa: E402
-
-from simbake import _core  # noqa: E402
+import run_simbake  # noqa: E402
 
 
 def trace(n: int, seconds: float, held: bool, stiffness: float = spec.STRETCH) -> list[float]:
-    world = _core.World(gravity=np.array([0.0, -spec.GRAVITY, 0.0]), threads=1, cloth_contacts_in_solve=held)
-    world.set_ground(spec.GROUND, 0.5, 0.0)
-    radius = spec.SPHERE_RADIUS
-    world.add_body(_core.LevelSet.sphere(radius), _core.sphere_mesh(radius, 4)[0], _core.sphere_mass_properties(radius),
-                   1.0, np.array(spec.SPHERE_CENTER), np.array([1.0, 0.0, 0.0, 0.0]), friction=0.5, kinematic=True)
+    world = run_simbake.build(n, 1.0 / 120.0, 1e-3, "implicit", "springs", contacts_in_solve=held,
+                              stretch=stiffness, strain_limit=0.0)
     vertices, triangles = spec.grid(n)
-    world.add_cloth(vertices, triangles, area_density=spec.AREA_DENSITY, stretch_stiffness=stiffness,
-                    bend_stiffness=spec.BEND, damping=0.01, strain_limit=0.0, friction=0.4,
-                    thickness=spec.THICKNESS)
     edges = np.unique(np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]),
                               axis=1), axis=0)
     rest = np.linalg.norm(vertices[edges[:, 1]] - vertices[edges[:, 0]], axis=1)
