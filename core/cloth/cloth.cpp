@@ -318,12 +318,57 @@ void set_damping(double damping, const Points& v, const Points& midpoint, double
 
 }  // namespace
 
-Cloth::Cloth(const ClothDesc& desc)
-    : material_(desc.material),
-      integrator_(desc.integrator),
-      tolerance_(desc.tolerance),
-      triangles_(desc.triangles),
-      x_(desc.rest) {
+namespace {
+
+// An upper bound of the largest eigenvalue of M^-1/2 H M^-1/2 over the free vertices at
+// rest (the squared fastest frequency), for in-plane and/or bending terms: its largest
+// Gershgorin row sum
+double largest_omega2(const ClothModel& m, bool stretch, bool bend) {
+  if (m.free_count == 0) return 0.0;
+  Eigen::SparseMatrix<double> H = m.pattern->make_matrix();
+  cloth_detail::Assembly what;
+  what.stretch = stretch;
+  what.bend = bend;
+  what.hessian_weight = 1.0;
+  what.pattern = m.pattern.get();
+  what.matrix = &H;
+  m.forces->assemble(m.rest, what);  // at rest the Hessian equals its material part
+  Eigen::VectorXd inverse_sqrt_mass(3 * m.free_count);
+  for (int k = 0; k < static_cast<int>(m.rest.rows()); ++k) {
+    if (m.free_index[k] >= 0) inverse_sqrt_mass.segment<3>(3 * m.free_index[k]).setConstant(1.0 / std::sqrt(m.mass[k]));
+  }
+  double omega2 = 0.0;
+  for (int col = 0; col < H.outerSize(); ++col) {  // symmetric: column sums are row sums
+    double sum = 0.0;
+    for (Eigen::SparseMatrix<double>::InnerIterator it(H, col); it; ++it) {
+      sum += std::abs(it.value()) * inverse_sqrt_mass[it.row()];
+    }
+    omega2 = std::max(omega2, sum * inverse_sqrt_mass[col]);
+  }
+  return omega2;
+}
+
+// the explicit stability limit (derivation at the top of this file)
+double explicit_stable_step(const ClothModel& m) {
+  if (m.free_count == 0) return std::numeric_limits<double>::infinity();
+  // stiffening under stretch up to the strain limit (nominal 10% when unlimited)
+  const double e = m.material.strain_limit > 0.0 ? m.material.strain_limit : 0.1;
+  const double stiffening =
+      m.material.model == InPlaneModel::kMembrane ? 0.5 * (3.0 * (1.0 + e) * (1.0 + e) - 1.0) : 1.0 + e / (1.0 + e);
+  const double omega2 = stiffening * largest_omega2(m, true, false) + largest_omega2(m, false, true);
+  if (!(omega2 > 0.0)) return std::numeric_limits<double>::infinity();
+  const double c = m.material.damping;
+  return kStableSafety * (std::sqrt(c * c + 4.0 / omega2) - c);
+}
+
+}  // namespace
+
+ClothModel::ClothModel(const ClothDesc& desc)
+    : material(desc.material),
+      integrator(desc.integrator),
+      tolerance(desc.tolerance),
+      rest(desc.rest),
+      triangles(desc.triangles) {
   // validate the description
   const int n = static_cast<int>(desc.rest.rows());
   require(n >= 3, "needs at least 3 vertices");
@@ -340,7 +385,7 @@ Cloth::Cloth(const ClothDesc& desc)
   require(desc.tolerance > 0.0 && desc.tolerance < 1.0, "tolerance must be in (0, 1)");
 
   // lumped masses: a third of each triangle's rest area times the area density
-  mass_ = Eigen::VectorXd::Zero(n);
+  mass = Eigen::VectorXd::Zero(n);
   for (int t = 0; t < desc.triangles.rows(); ++t) {
     const int a = desc.triangles(t, 0), b = desc.triangles(t, 1), c = desc.triangles(t, 2);
     for (int v : {a, b, c}) {
@@ -348,56 +393,59 @@ Cloth::Cloth(const ClothDesc& desc)
                                    " that does not exist (the cloth has " + std::to_string(n) + ")");
     }
     require(a != b && b != c && a != c, "triangle " + std::to_string(t) + " repeats a vertex");
-    const double area = 0.5 * (row(x_, b) - row(x_, a)).cross(row(x_, c) - row(x_, a)).norm();
+    const double area = 0.5 * (row(rest, b) - row(rest, a)).cross(row(rest, c) - row(rest, a)).norm();
     require(area > 0.0, "triangle " + std::to_string(t) + " has zero area");
-    for (int v : {a, b, c}) mass_[v] += desc.area_density * area / 3.0;
+    for (int v : {a, b, c}) mass[v] += desc.area_density * area / 3.0;
   }
-  for (int v = 0; v < n; ++v) require(mass_[v] > 0.0, "vertex " + std::to_string(v) + " belongs to no triangle");
+  for (int v = 0; v < n; ++v) require(mass[v] > 0.0, "vertex " + std::to_string(v) + " belongs to no triangle");
 
   // pinned vertices and the implicit system's numbering of the free ones
-  pinned_.assign(n, 0);
+  pinned.assign(n, 0);
   for (int p : desc.pinned) {
     require(p >= 0 && p < n, "pinned vertex " + std::to_string(p) + " does not exist (the cloth has " +
                                  std::to_string(n) + ")");
-    pinned_[p] = 1;
+    pinned[p] = 1;
   }
-  free_index_.assign(n, -1);
+  free_index.assign(n, -1);
   for (int v = 0; v < n; ++v) {
-    if (!pinned_[v]) free_index_[v] = free_count_++;
+    if (!pinned[v]) free_index[v] = free_count++;
   }
 
-  // state: at rest, still
-  v_ = Points::Zero(n, 3);
-  model_ = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
-  pattern_ = std::make_shared<const cloth_detail::MatrixPattern>(*model_, free_index_);
+  forces = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
+  pattern = std::make_shared<const cloth_detail::MatrixPattern>(*forces, free_index);
+  // the strain limiter's edge orders: as stored (sorted by vertex indices), and reversed
+  forward_order.resize(forces->edges().size());
+  for (size_t q = 0; q < forward_order.size(); ++q) forward_order[q] = static_cast<int>(q);
+  backward_order.assign(forward_order.rbegin(), forward_order.rend());
+  stable_step = explicit_stable_step(*this);
+  double total_length = 0.0;
+  for (const cloth_detail::Edge& e : forces->edges()) total_length += e.rest;
+  max_correction = kMaxCorrection * total_length / static_cast<double>(forces->edges().size());
+}
+
+Cloth::Cloth(const ClothDesc& desc)
+    : model_(std::make_shared<const ClothModel>(desc)), x_(desc.rest), v_(Points::Zero(desc.rest.rows(), 3)) {
+  const ClothModel& m = *model_;
+  const int n = vertex_count();
   // the implicit solve's preconditioner: multigrid over the free vertices' edge graph
   const bool multigrid = desc.preconditioner == ClothPreconditioner::kMultigrid ||
-                         (desc.preconditioner == ClothPreconditioner::kAutomatic && free_count_ >= kMultigridVertices);
-  if (integrator_ == ClothIntegrator::kImplicit && free_count_ > 0 && multigrid) {
-    std::vector<std::vector<int>> graph(free_count_);
-    for (const cloth_detail::Edge& e : model_->edges()) {
-      const int a = free_index_[e.i], b = free_index_[e.j];
+                         (desc.preconditioner == ClothPreconditioner::kAutomatic && m.free_count >= kMultigridVertices);
+  if (m.integrator == ClothIntegrator::kImplicit && m.free_count > 0 && multigrid) {
+    std::vector<std::vector<int>> graph(m.free_count);
+    for (const cloth_detail::Edge& e : m.forces->edges()) {
+      const int a = m.free_index[e.i], b = m.free_index[e.j];
       if (a < 0 || b < 0) continue;
       graph[a].push_back(b);
       graph[b].push_back(a);
     }
-    Eigen::VectorXd scale(free_count_);
+    Eigen::VectorXd scale(m.free_count);
     for (int v = 0; v < n; ++v) {
-      if (free_index_[v] >= 0) scale[free_index_[v]] = std::sqrt(mass_[v]);
+      if (m.free_index[v] >= 0) scale[m.free_index[v]] = std::sqrt(m.mass[v]);
     }
-    preconditioner_ = std::make_shared<cloth_detail::Multigrid>(pattern_->make_matrix(), graph, scale);
+    preconditioner_ = std::make_shared<cloth_detail::Multigrid>(m.pattern->make_matrix(), graph, scale);
   } else {
     preconditioner_ = std::make_shared<cloth_detail::BlockJacobi>();
   }
-
-  // the strain limiter's edge orders: as stored (sorted by vertex indices), and reversed
-  forward_order_.resize(model_->edges().size());
-  for (size_t q = 0; q < forward_order_.size(); ++q) forward_order_[q] = static_cast<int>(q);
-  backward_order_.assign(forward_order_.rbegin(), forward_order_.rend());
-  stable_step_ = compute_stable_step();
-  double total_length = 0.0;
-  for (const cloth_detail::Edge& e : model_->edges()) total_length += e.rest;
-  max_correction_ = kMaxCorrection * total_length / static_cast<double>(model_->edges().size());
 }
 
 // ---- stage: forces and the velocity update
@@ -411,14 +459,14 @@ void Cloth::update_velocities(double dt, const Vec3& gravity, std::vector<ClothC
       c.friction.setZero();
     }
   }
-  if (integrator_ == ClothIntegrator::kImplicit) {
+  if (model_->integrator == ClothIntegrator::kImplicit) {
     implicit_velocities(dt, gravity, constraints);
   } else {
     explicit_velocities(dt, gravity, constraints);
   }
   // pinned vertices never move
   for (int k = 0; k < vertex_count(); ++k) {
-    if (pinned_[k]) v_.row(k).setZero();
+    if (model_->pinned[k]) v_.row(k).setZero();
   }
 }
 
@@ -430,18 +478,18 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   cloth_detail::Assembly what;
   what.force = &force;
   const Points midpoint = x_ + (0.5 * dt) * v_;
-  set_damping(material_.damping, v_, midpoint, 0.0, what);
-  model_->assemble(x_, what);
+  set_damping(model_->material.damping, v_, midpoint, 0.0, what);
+  model_->forces->assemble(x_, what);
   for (int k = 0; k < vertex_count(); ++k) {
-    if (pinned_[k]) continue;
-    v_.row(k) += dt * (force.segment<3>(3 * k) / mass_[k] + gravity).transpose();
+    if (model_->pinned[k]) continue;
+    v_.row(k) += dt * (force.segment<3>(3 * k) / model_->mass[k] + gravity).transpose();
   }
   if (!constraints) return;
   for (ClothContactConstraint& c : *constraints) {
-    if (pinned_[c.vertex]) continue;
+    if (model_->pinned[c.vertex]) continue;
     const Vec3 before = row(v_, c.vertex), after = constrained_velocity(c, before);
     v_.row(c.vertex) = after.transpose();
-    const Vec3 impulse = mass_[c.vertex] * (after - before);
+    const Vec3 impulse = model_->mass[c.vertex] * (after - before);
     c.impulse = impulse.dot(c.normal);
     c.friction = impulse - c.impulse * c.normal;
   }
@@ -453,10 +501,10 @@ void Cloth::explicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
 // With contact constraints (see ClothContactConstraint), the unknowns' components along
 // their normals are fixed and the conjugate gradients filtered (conjugate_gradients).
 void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints) {
-  if (free_count_ == 0) return;
+  if (model_->free_count == 0) return;
   const int n = vertex_count();
   Eigen::SparseMatrix<double>& system = system_;
-  if (system.rows() == 0) system = pattern_->make_matrix();
+  if (system.rows() == 0) system = model_->pattern->make_matrix();
   system.coeffs().setZero();
   // elastic forces at the prediction and their Hessian, damping at the midpoint
   Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * n);
@@ -465,21 +513,21 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   cloth_detail::Assembly what;
   what.hessian_weight = dt * dt;
   what.force = &force;
-  what.pattern = pattern_.get();
+  what.pattern = model_->pattern.get();
   what.matrix = &system;
-  set_damping(material_.damping, v_, midpoint, material_.damping * dt, what);
-  model_->assemble(predicted, what);
+  set_damping(model_->material.damping, v_, midpoint, model_->material.damping * dt, what);
+  model_->forces->assemble(predicted, what);
   // the mass diagonal and the right-hand side, over free vertices only; the system is
   // scaled by M^-1/2 on both sides (unknown z = M^1/2 dv), so that the residual is measured
   // in the norm that bounds the velocity error in kinetic-energy terms, |e|_M <= |r|_(M^-1)
-  Eigen::VectorXd rhs(3 * free_count_), scale(3 * free_count_);
+  Eigen::VectorXd rhs(3 * model_->free_count), scale(3 * model_->free_count);
   for (int k = 0; k < n; ++k) {
-    const int i = free_index_[k];
+    const int i = model_->free_index[k];
     if (i < 0) continue;
     for (int r = 0; r < 3; ++r) {
-      system.coeffRef(3 * i + r, 3 * i + r) += mass_[k];
-      scale[3 * i + r] = 1.0 / std::sqrt(mass_[k]);
-      rhs[3 * i + r] = dt * (force[3 * k + r] + mass_[k] * gravity[r]) * scale[3 * i + r];
+      system.coeffRef(3 * i + r, 3 * i + r) += model_->mass[k];
+      scale[3 * i + r] = 1.0 / std::sqrt(model_->mass[k]);
+      rhs[3 * i + r] = dt * (force[3 * k + r] + model_->mass[k] * gravity[r]) * scale[3 * i + r];
     }
   }
   for (int col = 0; col < system.outerSize(); ++col) {
@@ -500,10 +548,10 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   // corrections went mostly into the held directions, and the filter threw them away.
   std::vector<Filter> filter;
   std::vector<double> stiffness;  // (filter) alpha of each
-  Eigen::VectorXd z = Eigen::VectorXd::Zero(3 * free_count_);
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(3 * model_->free_count);
   if (constraints) {
     for (const ClothContactConstraint& c : *constraints) {
-      const int i = free_index_[c.vertex];
+      const int i = model_->free_index[c.vertex];
       if (i < 0) continue;
       require(std::abs(c.normal.norm() - 1.0) < 1e-9, "constraint: normal must be a unit vector");
       filter.push_back({i, c.normal, c.stick});
@@ -522,12 +570,12 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
     }
   }
   preconditioner_->update(system);
-  solver_iterations_ += conjugate_gradients(*preconditioner_, rhs, tolerance_, z, filter);
+  solver_iterations_ += conjugate_gradients(*preconditioner_, rhs, model_->tolerance, z, filter);
   solver_seconds_ += thread_cpu_seconds() - solve_start;
   if (constraints) {
     // the surfaces' impulses: (A dv - b) in the held directions, unscaled (A dv - b =
     // M^1/2 (A_s z - b_s)), A without the stiffness added for the preconditioner
-    std::vector<Vec3> impulse(free_count_, Vec3::Zero());
+    std::vector<Vec3> impulse(model_->free_count, Vec3::Zero());
     for (size_t f = 0; f < filter.size(); ++f) {
       const int i = filter[f].block;
       const Mat3 held = filter[f].held();
@@ -535,7 +583,7 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
                     stiffness[f] * held * z.segment<3>(3 * i)) / scale[3 * i];
     }
     for (ClothContactConstraint& c : *constraints) {
-      const int i = free_index_[c.vertex];
+      const int i = model_->free_index[c.vertex];
       if (i < 0) continue;
       c.impulse = impulse[i].dot(c.normal);
       c.friction = impulse[i] - c.impulse * c.normal;
@@ -544,15 +592,15 @@ void Cloth::implicit_velocities(double dt, const Vec3& gravity, std::vector<Clot
   Eigen::VectorXd dv = scale.asDiagonal() * z;
   // With no vertex pinned or held the exact dv changes the total momentum by exactly dt M g
   // (the internal forces sum to zero); the solver's residual need not, so its net part is removed
-  if (free_count_ == n && filter.empty()) {
-    const double total_mass = mass_.sum();
+  if (model_->free_count == n && filter.empty()) {
+    const double total_mass = model_->mass.sum();
     Vec3 excess = -dt * total_mass * gravity;
-    for (int k = 0; k < n; ++k) excess += mass_[k] * dv.segment<3>(3 * k);
+    for (int k = 0; k < n; ++k) excess += model_->mass[k] * dv.segment<3>(3 * k);
     const Vec3 correction = excess / total_mass;
     for (int k = 0; k < n; ++k) dv.segment<3>(3 * k) -= correction;
   }
   for (int k = 0; k < n; ++k) {
-    const int i = free_index_[k];
+    const int i = model_->free_index[k];
     if (i >= 0) v_.row(k) += dv.segment<3>(3 * i).transpose();
   }
 }
@@ -568,21 +616,21 @@ bool Cloth::uses_multigrid() const {
 // equal and opposite, shared by the inverse masses. Returns the largest correction made
 // (relative to the rest length).
 double Cloth::strain_sweep(double dt, const std::vector<int>& order) {
-  const std::vector<cloth_detail::Edge>& edges = model_->edges();
-  const double limit = material_.strain_limit;
-  const bool enforce = material_.compression == CompressionMode::kEnforce;
+  const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
+  const double limit = model_->material.strain_limit;
+  const bool enforce = model_->material.compression == CompressionMode::kEnforce;
   double worst = 0.0;
   for (int q : order) {
     const cloth_detail::Edge& e = edges[q];
-    const double wi = pinned_[e.i] ? 0.0 : 1.0 / mass_[e.i];
-    const double wj = pinned_[e.j] ? 0.0 : 1.0 / mass_[e.j];
+    const double wi = still(e.i) ? 0.0 : 1.0 / model_->mass[e.i];
+    const double wj = still(e.j) ? 0.0 : 1.0 / model_->mass[e.j];
     if (wi + wj == 0.0) continue;
     const Vec3 d = row(x_, e.j) + dt * row(v_, e.j) - row(x_, e.i) - dt * row(v_, e.i);
     const double length = d.norm();
     const double target = strain_target(length, e.rest, limit, enforce);
     if (target < 0.0 || length <= 0.0) continue;
     worst = std::max(worst, std::abs(length - target) / e.rest);
-    const double excess = std::clamp(length - target, -max_correction_, max_correction_);
+    const double excess = std::clamp(length - target, -model_->max_correction, model_->max_correction);
     const Vec3 change = (excess / (dt * (wi + wj) * length)) * d;
     v_.row(e.i) += (wi * change).transpose();
     v_.row(e.j) -= (wj * change).transpose();
@@ -592,11 +640,11 @@ double Cloth::strain_sweep(double dt, const std::vector<int>& order) {
 
 void Cloth::limit_strain(double dt, bool global) {
   require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
-  if (material_.strain_limit <= 0.0 && material_.compression != CompressionMode::kEnforce) return;
+  if (model_->material.strain_limit <= 0.0 && model_->material.compression != CompressionMode::kEnforce) return;
   // Gauss-Seidel sweeps with the true masses, forward and backward in turn (momentum is
   // kept: every impulse is internal); usually a few are enough
   for (int sweep = 0; sweep < kStrainSweeps; ++sweep) {
-    if (strain_sweep(dt, sweep % 2 == 0 ? forward_order_ : backward_order_) < kStrainTolerance) return;
+    if (strain_sweep(dt, sweep % 2 == 0 ? model_->forward_order : model_->backward_order) < kStrainTolerance) return;
   }
   // They converge slowly where a long chain of edges holds a load (a soft cloth hanging
   // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
@@ -605,11 +653,10 @@ void Cloth::limit_strain(double dt, bool global) {
 }
 
 void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
-  require(held.size() == pinned_.size(), "held: one flag per vertex");
-  const std::vector<char> pinned = pinned_;
-  for (size_t k = 0; k < held.size(); ++k) pinned_[k] = pinned_[k] || held[k];
+  require(held.size() == model_->pinned.size(), "held: one flag per vertex");
+  held_ = &held;
   limit_strain(dt, true);
-  pinned_ = pinned;
+  held_ = nullptr;
 }
 
 // Strain limiting for all edges at once: Newton iterations on the candidate lengths (the
@@ -620,11 +667,11 @@ void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
 // sweep. An edge is active while it violates its bound, and stays active (held at the
 // bound) until its impulse would have to push the wrong way (apart for a stretched edge).
 void Cloth::project_strain(double dt) {
-  const std::vector<cloth_detail::Edge>& edges = model_->edges();
-  const double limit = material_.strain_limit;
-  const bool enforce = material_.compression == CompressionMode::kEnforce;
+  const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
+  const double limit = model_->material.strain_limit;
+  const bool enforce = model_->material.compression == CompressionMode::kEnforce;
   const int count = static_cast<int>(edges.size()), n = vertex_count();
-  auto inverse_mass = [&](int k) { return pinned_[k] ? 0.0 : 1.0 / mass_[k]; };
+  auto inverse_mass = [&](int k) { return still(k) ? 0.0 : 1.0 / model_->mass[k]; };
   std::vector<double> target(count, -1.0);  // >= 0: the edge is active, held at this length
   for (int iteration = 0; iteration < kProjectionIterations; ++iteration) {
     const Points p = x_ + dt * v_;
@@ -660,7 +707,7 @@ void Cloth::project_strain(double dt) {
         const cloth_detail::Edge& e = edges[active[a]];
         const Vec3 d = row(p, e.j) - row(p, e.i);
         if (length[active[a]] > 0.0) direction[a] = d / length[active[a]];
-        error[a] = std::clamp(length[active[a]] - target[active[a]], -max_correction_, max_correction_);
+        error[a] = std::clamp(length[active[a]] - target[active[a]], -model_->max_correction, model_->max_correction);
         at_vertex[e.i].push_back({a, -1.0});
         at_vertex[e.j].push_back({a, 1.0});
       }
@@ -727,7 +774,7 @@ void Cloth::project_strain(double dt) {
 void Cloth::update_positions(double dt) {
   require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
   for (int k = 0; k < vertex_count(); ++k) {
-    if (pinned_[k]) {
+    if (model_->pinned[k]) {
       v_.row(k).setZero();
     } else {
       x_.row(k) += dt * v_.row(k);
@@ -737,67 +784,27 @@ void Cloth::update_positions(double dt) {
 
 // ---- the explicit stability limit (derivation at the top of this file)
 
-double Cloth::stable_explicit_step() const { return stable_step_; }
-
-double Cloth::compute_stable_step() const {
-  if (free_count_ == 0) return std::numeric_limits<double>::infinity();
-  // stiffening under stretch up to the strain limit (nominal 10% when unlimited)
-  const double e = material_.strain_limit > 0.0 ? material_.strain_limit : 0.1;
-  const double stiffening =
-      material_.model == InPlaneModel::kMembrane ? 0.5 * (3.0 * (1.0 + e) * (1.0 + e) - 1.0) : 1.0 + e / (1.0 + e);
-  const double omega2 = stiffening * largest_omega2(true, false) + largest_omega2(false, true);
-  if (!(omega2 > 0.0)) return std::numeric_limits<double>::infinity();
-  const double c = material_.damping;
-  return kStableSafety * (std::sqrt(c * c + 4.0 / omega2) - c);
-}
-
-// An upper bound of the largest eigenvalue of M^-1/2 H M^-1/2 over the free vertices at
-// rest (the squared fastest frequency), for in-plane and/or bending terms: its largest
-// Gershgorin row sum
-double Cloth::largest_omega2(bool stretch, bool bend) const {
-  if (free_count_ == 0) return 0.0;
-  Eigen::SparseMatrix<double> H = pattern_->make_matrix();
-  cloth_detail::Assembly what;
-  what.stretch = stretch;
-  what.bend = bend;
-  what.hessian_weight = 1.0;
-  what.pattern = pattern_.get();
-  what.matrix = &H;
-  model_->assemble(x_, what);  // at rest the Hessian equals its material part
-  Eigen::VectorXd inverse_sqrt_mass(3 * free_count_);
-  for (int k = 0; k < vertex_count(); ++k) {
-    if (free_index_[k] >= 0) inverse_sqrt_mass.segment<3>(3 * free_index_[k]).setConstant(1.0 / std::sqrt(mass_[k]));
-  }
-  double omega2 = 0.0;
-  for (int col = 0; col < H.outerSize(); ++col) {  // symmetric: column sums are row sums
-    double sum = 0.0;
-    for (Eigen::SparseMatrix<double>::InnerIterator it(H, col); it; ++it) {
-      sum += std::abs(it.value()) * inverse_sqrt_mass[it.row()];
-    }
-    omega2 = std::max(omega2, sum * inverse_sqrt_mass[col]);
-  }
-  return omega2;
-}
+double Cloth::stable_explicit_step() const { return model_->stable_step; }
 
 // ---- measurements
 
-double Cloth::elastic_energy() const { return model_->stretch_energy(x_) + model_->bend_energy(x_); }
+double Cloth::elastic_energy() const { return model_->forces->stretch_energy(x_) + model_->forces->bend_energy(x_); }
 
 double Cloth::kinetic_energy() const {
   double e = 0.0;
-  for (int k = 0; k < vertex_count(); ++k) e += 0.5 * mass_[k] * v_.row(k).squaredNorm();
+  for (int k = 0; k < vertex_count(); ++k) e += 0.5 * model_->mass[k] * v_.row(k).squaredNorm();
   return e;
 }
 
 double Cloth::potential_energy(const Vec3& gravity) const {
   double e = 0.0;
-  for (int k = 0; k < vertex_count(); ++k) e -= mass_[k] * gravity.dot(row(x_, k));
+  for (int k = 0; k < vertex_count(); ++k) e -= model_->mass[k] * gravity.dot(row(x_, k));
   return e;
 }
 
 double Cloth::max_strain() const {
   double strain = -1.0;
-  for (const cloth_detail::Edge& e : model_->edges()) {
+  for (const cloth_detail::Edge& e : model_->forces->edges()) {
     strain = std::max(strain, (row(x_, e.j) - row(x_, e.i)).norm() / e.rest - 1.0);
   }
   return strain;
@@ -805,7 +812,7 @@ double Cloth::max_strain() const {
 
 double Cloth::candidate_strain(double dt) const {
   double strain = 0.0;
-  for (const cloth_detail::Edge& e : model_->edges()) {
+  for (const cloth_detail::Edge& e : model_->forces->edges()) {
     const Vec3 d = row(x_, e.j) + dt * row(v_, e.j) - row(x_, e.i) - dt * row(v_, e.i);
     strain = std::max(strain, d.norm() / e.rest - 1.0);
   }
@@ -815,7 +822,7 @@ double Cloth::candidate_strain(double dt) const {
 Points Cloth::vertex_normals() const {
   TriangleMesh mesh;
   mesh.vertices = x_;
-  mesh.triangles = triangles_;
+  mesh.triangles = model_->triangles;
   return simbake::vertex_normals(mesh);
 }
 

@@ -13,6 +13,7 @@
 //   update_positions(dt)             x += dt v; pinned vertices stay where they are
 #pragma once
 
+#include "cloth/cloth_model.h"
 #include "math/types.h"
 
 #include <Eigen/SparseCore>
@@ -23,40 +24,8 @@
 namespace simbake {
 
 namespace cloth_detail {
-class ForceModel;     // cloth/cloth_forces.h: topology, rest state and element forces
-class MatrixPattern;  // cloth/cloth_forces.h: the implicit system's sparsity pattern
 class Preconditioner; // cloth/multigrid.h: z = P^-1 r for the implicit system's conjugate gradients
 }
-
-enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
-enum class CompressionMode { kSubgrid, kEnforce, kNone };
-enum class ClothIntegrator { kExplicit, kImplicit };
-// the implicit solve's preconditioner: automatic = multigrid from 1,000 free vertices when none is
-// pinned, else block-Jacobi (cloth.cpp says why)
-enum class ClothPreconditioner { kAutomatic, kBlockJacobi, kMultigrid };
-
-struct ClothMaterial {
-  InPlaneModel model = InPlaneModel::kSprings;
-  double stretch_stiffness = 1000.0;  // the sheet's stiffness Y (N/m): the membrane's Young's modulus x
-                                      // thickness; springs get E = Y x (area share) / L each (cloth.cpp)
-  double poisson_ratio = 0.3;         // membrane only
-  double bend_stiffness = 1e-4;       // B (N m): bending energy density 1/2 B (1/R1 + 1/R2)^2
-  double damping = 0.01;              // Rayleigh stiffness-proportional damping coefficient (s)
-  double strain_limit = 0.1;          // largest stretch (|l| / L - 1) allowed; 0 disables
-  CompressionMode compression = CompressionMode::kSubgrid;
-  double subgrid_scale = 0.01;        // subgrid: stiffness multiplier under compression
-};
-
-struct ClothDesc {
-  Points rest;                        // (n x 3) rest positions = initial positions (m)
-  Triangles triangles;                // (m x 3)
-  double area_density = 0.1;          // (kg/m^2), lumped to vertices (a third of each triangle)
-  ClothMaterial material;
-  std::vector<int> pinned;            // vertices held fixed
-  ClothIntegrator integrator = ClothIntegrator::kImplicit;
-  double tolerance = 1e-3;            // implicit: the linear solve's relative residual (mass norm)
-  ClothPreconditioner preconditioner = ClothPreconditioner::kAutomatic;  // implicit: of its conjugate gradients
-};
 
 // A contact held inside the velocity update (Baraff and Witkin 1998, "Large steps in cloth
 // simulation", section 5.3: constraint filtering): after the update, the vertex's velocity
@@ -102,50 +71,38 @@ class Cloth {
   Points vertex_normals() const;
 
   int vertex_count() const { return static_cast<int>(x_.rows()); }
-  const Triangles& triangles() const { return triangles_; }
-  const Eigen::VectorXd& masses() const { return mass_; }      // (n) lumped masses (kg)
-  const std::vector<char>& pinned() const { return pinned_; }  // (n) 1 if pinned
+  const Triangles& triangles() const { return model_->triangles; }
+  const Eigen::VectorXd& masses() const { return model_->mass; }      // (n) lumped masses (kg)
+  const std::vector<char>& pinned() const { return model_->pinned; }  // (n) 1 if pinned
   Points& positions() { return x_; }                            // (n x 3) (m)
   const Points& positions() const { return x_; }
   Points& velocities() { return v_; }                           // (n x 3) (m/s)
   const Points& velocities() const { return v_; }
-  const ClothMaterial& material() const { return material_; }
-  ClothIntegrator integrator() const { return integrator_; }
+  const ClothMaterial& material() const { return model_->material; }
+  const ClothModel& model() const { return *model_; }
+  ClothIntegrator integrator() const { return model_->integrator; }
   long long solver_iterations() const { return solver_iterations_; }  // implicit solves' CG iterations so far
   double solver_seconds() const { return solver_seconds_; }  // their CPU time (s): preconditioner update and CG
   bool uses_multigrid() const;  // the implicit solve's preconditioner is multigrid (else block-Jacobi)
 
  private:
-  // (the helper implementing this class adds the private members it needs:
-  //  edges and rest lengths, hinges and rest angles, triangle rest frames, solver scratch)
-  ClothMaterial material_;
-  ClothIntegrator integrator_;
-  double tolerance_;
+  // the constant half, shared by copies (cloth_model.h)
+  std::shared_ptr<const ClothModel> model_;
+  // the state
+  Points x_, v_;
+  // the implicit step's scratch: its matrix (the model's pattern), rebuilt each step, and
+  // z = P^-1 r for its solve, whose structure is built once and whose values change every
+  // step, so a copy of a Cloth takes its own (clone) before its first solve
+  Eigen::SparseMatrix<double> system_;
+  std::shared_ptr<cloth_detail::Preconditioner> preconditioner_;
   long long solver_iterations_ = 0;
   double solver_seconds_ = 0.0;
-  Triangles triangles_;
-  Eigen::VectorXd mass_;
-  std::vector<char> pinned_;
-  Points x_, v_;
-
-  // edges, hinges, membrane rest frames and the element forces; constant after
-  // construction, so copies of a Cloth share it
-  std::shared_ptr<const cloth_detail::ForceModel> model_;
-  std::shared_ptr<const cloth_detail::MatrixPattern> pattern_;
-  Eigen::SparseMatrix<double> system_;  // the implicit step's matrix (pattern_'s), rebuilt each step
-  std::vector<int> free_index_;  // vertex -> its block in the implicit system, -1 if pinned
-  // z = P^-1 r for the implicit solve, built once; its values change every step, so a copy
-  // of a Cloth takes its own (clone) before its first solve
-  std::shared_ptr<cloth_detail::Preconditioner> preconditioner_;
-  int free_count_ = 0;
-  double stable_step_ = 0.0;     // stable_explicit_step(), computed once
-  double max_correction_ = 0.0;  // the strain limiter's largest length correction per step (m)
-  std::vector<int> forward_order_, backward_order_;  // the strain limiter's sweep orders
+  // (n) vertices limit_strain_holding holds still besides the pinned ones, during that call
+  const std::vector<char>* held_ = nullptr;
+  bool still(int k) const { return model_->pinned[k] || (held_ && (*held_)[k]); }
 
   void explicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
   void implicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
-  double compute_stable_step() const;
-  double largest_omega2(bool stretch, bool bend) const;
   double strain_sweep(double dt, const std::vector<int>& order);
   void project_strain(double dt);
 };

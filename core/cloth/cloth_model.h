@@ -1,0 +1,71 @@
+// The constant half of a cloth (DESIGN.md, "Where the core is heading": a model / data
+// split): what a cloth is made of (ClothDesc, ClothMaterial) and what is built from it once
+// (ClothModel: topology, rest state, masses, pins, material, the element forces, the implicit
+// system's pattern, the explicit stability limit). Copies of a Cloth share one model and
+// hold only their state (x, v) and the solver's scratch (cloth.h).
+#pragma once
+
+#include "math/types.h"
+
+#include <memory>
+#include <vector>
+
+namespace simbake {
+
+namespace cloth_detail {
+class ForceModel;     // cloth/cloth_forces.h: topology, rest state and element forces
+class MatrixPattern;  // cloth/cloth_forces.h: the implicit system's sparsity pattern
+}
+
+enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | StVK membrane per triangle
+enum class CompressionMode { kSubgrid, kEnforce, kNone };
+enum class ClothIntegrator { kExplicit, kImplicit };
+// the implicit solve's preconditioner: automatic = multigrid from 1,000 free vertices when none is
+// pinned, else block-Jacobi (cloth.cpp says why)
+enum class ClothPreconditioner { kAutomatic, kBlockJacobi, kMultigrid };
+
+struct ClothMaterial {
+  InPlaneModel model = InPlaneModel::kSprings;
+  double stretch_stiffness = 1000.0;  // the sheet's stiffness Y (N/m): the membrane's Young's modulus x
+                                      // thickness; springs get E = Y x (area share) / L each (cloth.cpp)
+  double poisson_ratio = 0.3;         // membrane only
+  double bend_stiffness = 1e-4;       // B (N m): bending energy density 1/2 B (1/R1 + 1/R2)^2
+  double damping = 0.01;              // Rayleigh stiffness-proportional damping coefficient (s)
+  double strain_limit = 0.1;          // largest stretch (|l| / L - 1) allowed; 0 disables
+  CompressionMode compression = CompressionMode::kSubgrid;
+  double subgrid_scale = 0.01;        // subgrid: stiffness multiplier under compression
+};
+
+struct ClothDesc {
+  Points rest;                        // (n x 3) rest positions = initial positions (m)
+  Triangles triangles;                // (m x 3)
+  double area_density = 0.1;          // (kg/m^2), lumped to vertices (a third of each triangle)
+  ClothMaterial material;
+  std::vector<int> pinned;            // vertices held fixed
+  ClothIntegrator integrator = ClothIntegrator::kImplicit;
+  double tolerance = 1e-3;            // implicit: the linear solve's relative residual (mass norm)
+  ClothPreconditioner preconditioner = ClothPreconditioner::kAutomatic;  // implicit: of its conjugate gradients
+};
+
+// Built once from a ClothDesc (cloth.cpp validates it and says how), never changed after
+struct ClothModel {
+  explicit ClothModel(const ClothDesc& desc);
+
+  ClothMaterial material;
+  ClothIntegrator integrator = ClothIntegrator::kImplicit;
+  double tolerance = 1e-3;
+  Points rest;                   // (n x 3) rest positions (m)
+  Triangles triangles;           // (m x 3)
+  Eigen::VectorXd mass;          // (n) lumped masses (kg)
+  std::vector<char> pinned;      // (n) 1 if pinned
+  std::vector<int> free_index;   // vertex -> its block in the implicit system, -1 if pinned
+  int free_count = 0;
+  // edges, hinges, membrane rest frames and the element forces
+  std::shared_ptr<const cloth_detail::ForceModel> forces;
+  std::shared_ptr<const cloth_detail::MatrixPattern> pattern;
+  double stable_step = 0.0;      // the largest stable explicit substep (s)
+  double max_correction = 0.0;   // the strain limiter's largest length correction per step (m)
+  std::vector<int> forward_order, backward_order;  // the strain limiter's sweep orders
+};
+
+}  // namespace simbake
