@@ -1,4 +1,4 @@
-// A triangle-mesh cloth: its constant description (topology, rest state, masses, material)
+// A triangle-mesh cloth: its constant model (cloth_model.h: topology, rest state, masses, material; shared by copies)
 // and its mutable state (positions and velocities), with the internal-force stages of the
 // world step. Collisions with bodies and the ground are the world's job (world/cloth_stages);
 // this class only knows the cloth itself.
