@@ -615,15 +615,18 @@ bool Cloth::uses_multigrid() const {
 // the impulse along it that puts its candidate length x + dt v exactly at the target,
 // equal and opposite, shared by the inverse masses. Returns the largest correction made
 // (relative to the rest length).
-double Cloth::strain_sweep(double dt, const std::vector<int>& order) {
+double Cloth::inverse_mass(int k, const std::vector<char>* held) const {
+  return model_->pinned[k] || (held && (*held)[k]) ? 0.0 : 1.0 / model_->mass[k];
+}
+
+double Cloth::strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held) {
   const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
   const double limit = model_->material.strain_limit;
   const bool enforce = model_->material.compression == CompressionMode::kEnforce;
   double worst = 0.0;
   for (int q : order) {
     const cloth_detail::Edge& e = edges[q];
-    const double wi = still(e.i) ? 0.0 : 1.0 / model_->mass[e.i];
-    const double wj = still(e.j) ? 0.0 : 1.0 / model_->mass[e.j];
+    const double wi = inverse_mass(e.i, held), wj = inverse_mass(e.j, held);
     if (wi + wj == 0.0) continue;
     const Vec3 d = row(x_, e.j) + dt * row(v_, e.j) - row(x_, e.i) - dt * row(v_, e.i);
     const double length = d.norm();
@@ -638,25 +641,25 @@ double Cloth::strain_sweep(double dt, const std::vector<int>& order) {
   return worst;
 }
 
-void Cloth::limit_strain(double dt, bool global) {
+void Cloth::limit_strain(double dt, bool global) { limit_strain(dt, global, nullptr); }
+
+void Cloth::limit_strain(double dt, bool global, const std::vector<char>* held) {
   require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
   if (model_->material.strain_limit <= 0.0 && model_->material.compression != CompressionMode::kEnforce) return;
   // Gauss-Seidel sweeps with the true masses, forward and backward in turn (momentum is
   // kept: every impulse is internal); usually a few are enough
   for (int sweep = 0; sweep < kStrainSweeps; ++sweep) {
-    if (strain_sweep(dt, sweep % 2 == 0 ? model_->forward_order : model_->backward_order) < kStrainTolerance) return;
+    if (strain_sweep(dt, sweep % 2 == 0 ? model_->forward_order : model_->backward_order, held) < kStrainTolerance) return;
   }
   // They converge slowly where a long chain of edges holds a load (a soft cloth hanging
   // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
   // 12 x 12 cloth can need hundreds of sweeps). The rest is solved for all edges at once.
-  if (global) project_strain(dt);
+  if (global) project_strain(dt, held);
 }
 
 void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
   require(held.size() == model_->pinned.size(), "held: one flag per vertex");
-  held_ = &held;
-  limit_strain(dt, true);
-  held_ = nullptr;
+  limit_strain(dt, true, &held);
 }
 
 // Strain limiting for all edges at once: Newton iterations on the candidate lengths (the
@@ -666,12 +669,11 @@ void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
 // and change v by W J^T mu / dt: along each edge, equal and opposite, mass-weighted, as in a
 // sweep. An edge is active while it violates its bound, and stays active (held at the
 // bound) until its impulse would have to push the wrong way (apart for a stretched edge).
-void Cloth::project_strain(double dt) {
+void Cloth::project_strain(double dt, const std::vector<char>* held) {
   const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
   const double limit = model_->material.strain_limit;
   const bool enforce = model_->material.compression == CompressionMode::kEnforce;
   const int count = static_cast<int>(edges.size()), n = vertex_count();
-  auto inverse_mass = [&](int k) { return still(k) ? 0.0 : 1.0 / model_->mass[k]; };
   std::vector<double> target(count, -1.0);  // >= 0: the edge is active, held at this length
   for (int iteration = 0; iteration < kProjectionIterations; ++iteration) {
     const Points p = x_ + dt * v_;
@@ -680,7 +682,7 @@ void Cloth::project_strain(double dt) {
     double worst = 0.0;
     for (int q = 0; q < count; ++q) {
       const cloth_detail::Edge& e = edges[q];
-      if (inverse_mass(e.i) + inverse_mass(e.j) == 0.0) continue;
+      if (inverse_mass(e.i, held) + inverse_mass(e.j, held) == 0.0) continue;
       length[q] = (row(p, e.j) - row(p, e.i)).norm();
       const double bound = strain_target(length[q], e.rest, limit, enforce);
       if (bound >= 0.0) {
@@ -715,7 +717,7 @@ void Cloth::project_strain(double dt) {
       std::vector<Eigen::Triplet<double>> triplets;
       double largest = 0.0;
       for (int k = 0; k < n; ++k) {
-        const double w = inverse_mass(k);
+        const double w = inverse_mass(k, held);
         if (w == 0.0) continue;
         for (const auto& [a, sa] : at_vertex[k]) {
           for (const auto& [b, sb] : at_vertex[k]) {
@@ -747,8 +749,8 @@ void Cloth::project_strain(double dt) {
       move.setZero(n, 3);
       for (int a = 0; a < m; ++a) {
         const cloth_detail::Edge& e = edges[active[a]];
-        move.row(e.i) -= (inverse_mass(e.i) * mu[a] * direction[a]).transpose();
-        move.row(e.j) += (inverse_mass(e.j) * mu[a] * direction[a]).transpose();
+        move.row(e.i) -= (inverse_mass(e.i, held) * mu[a] * direction[a]).transpose();
+        move.row(e.j) += (inverse_mass(e.j, held) * mu[a] * direction[a]).transpose();
       }
       const bool dropped = changed;
       for (int q = 0; q < count && !dropped; ++q) {

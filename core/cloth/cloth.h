@@ -79,7 +79,6 @@ class Cloth {
   Points& velocities() { return v_; }                           // (n x 3) (m/s)
   const Points& velocities() const { return v_; }
   const ClothMaterial& material() const { return model_->material; }
-  const ClothModel& model() const { return *model_; }
   ClothIntegrator integrator() const { return model_->integrator; }
   long long solver_iterations() const { return solver_iterations_; }  // implicit solves' CG iterations so far
   double solver_seconds() const { return solver_seconds_; }  // their CPU time (s): preconditioner update and CG
@@ -97,14 +96,15 @@ class Cloth {
   std::shared_ptr<cloth_detail::Preconditioner> preconditioner_;
   long long solver_iterations_ = 0;
   double solver_seconds_ = 0.0;
-  // (n) vertices limit_strain_holding holds still besides the pinned ones, during that call
-  const std::vector<char>* held_ = nullptr;
-  bool still(int k) const { return model_->pinned[k] || (held_ && (*held_)[k]); }
 
   void explicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
   void implicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
-  double strain_sweep(double dt, const std::vector<int>& order);
-  void project_strain(double dt);
+  // the strain limiter, with the vertices marked in `held` (n, or null) held still besides
+  // the pinned ones; a held or pinned vertex's inverse mass is 0
+  void limit_strain(double dt, bool global, const std::vector<char>* held);
+  double inverse_mass(int k, const std::vector<char>* held) const;
+  double strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held);
+  void project_strain(double dt, const std::vector<char>* held);
 };
 
 }  // namespace simbake
