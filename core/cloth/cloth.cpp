@@ -173,7 +173,7 @@ constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this ma
 // pinch stage (0 mm over its 97 frames, block-Jacobi 1.2 mm). Pinned cloths kept block-Jacobi
 // while a body's contact by the pins could hand its push to a free vertex of round-off weight
 // (the flag died in its first step with multigrid); that contact is now bounded
-// (world/cloth_stages.cpp, kMaxLever).
+// (contact/cloth_body_contact.cpp, kMaxLever).
 
 void require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("cloth: " + message);

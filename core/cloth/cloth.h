@@ -1,7 +1,7 @@
 // A triangle-mesh cloth: its constant model (cloth_model.h: topology, rest state, masses, material; shared by copies)
 // and its mutable state (positions and velocities), with the internal-force stages of the
-// world step. Collisions with bodies and the ground are the world's job (world/cloth_stages);
-// this class only knows the cloth itself.
+// world step. Collisions with bodies and the ground are contact/cloth_body_contact.h's (the
+// world calls them, world/cloth_stages.cpp); this class only knows the cloth itself.
 //
 // Stages the world calls, in order, each substep (DESIGN.md, "The world step", stage 6):
 //   update_velocities(dt, gravity)   forces (stretch/shear or membrane, bending, damping) and

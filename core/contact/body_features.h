@@ -51,7 +51,7 @@ struct BodyFeatures {
   Box3 bounds;                // of the points (m)
   std::vector<double> inside_below;  // (nfeature) a point behind the feature is inside the body where the
                                      // body's phi is below this (m): 0, or the level set's own phi at the
-                                     // feature where it rounds a sharp edge (see World::collide_features)
+                                     // feature where it rounds a sharp edge (see ClothBodyContact::collide_features)
 };
 
 // The exterior angle (rad) past which a mesh's crease is a feature for a cloth of thickness

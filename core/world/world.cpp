@@ -205,7 +205,7 @@ World::FrameSchedule World::frame_schedule(double frame_dt) const {
       reach.extend(Vec3(cloth.positions().row(k).transpose()));
       fastest = std::max(fastest, cloth.velocities().row(k).norm());
     }
-    reach_speed = std::max({reach_speed, fastest, cloth_thickness_[c] / frame_dt});
+    reach_speed = std::max({reach_speed, fastest, cloth_contacts_[c].thickness() / frame_dt});
   }
   const double gravity_speed = settings_.gravity.norm() * frame_dt;  // what gravity adds in a frame
   if (body_count() > 0) {

@@ -15,8 +15,9 @@
 //                      ground up, each level resting on the frozen levels below
 //   update_positions   x += dt v; q by the torque-free rotation with L fixed
 //   step_cloths        per cloth: internal forces and velocity update, collisions with every
-//                      body's level set and the ground (thickness, Coulomb friction on the
-//                      relative velocity, equal and opposite impulses on dynamic bodies),
+//                      body's level set and the ground (contact/cloth_body_contact.h:
+//                      thickness, Coulomb friction on the relative velocity, equal and
+//                      opposite impulses on dynamic bodies),
 //                      strain limiting and compression impulses, collisions again, positions.
 //                      Within a frame the cloths step at their own rate, once every few
 //                      substeps and over those substeps' time (see step_frame)
@@ -25,7 +26,7 @@
 
 #include "cloth/cloth.h"
 #include "cloth/self_collision.h"
-#include "contact/body_features.h"
+#include "contact/cloth_body_contact.h"
 #include "geometry/mass_properties.h"
 #include "geometry/mesh.h"
 #include "rigid/box_contact.h"
@@ -73,7 +74,7 @@ struct WorldSettings {
                                          // dynamic body and any restitution above 0 (see
                                          // frame_schedule)
   bool cloth_contacts_in_solve = true;   // cloth vertices resting on a surface are held there
-                                         // inside the implicit solve (cloth_stages.cpp,
+                                         // inside the implicit solve (contact/cloth_body_contact.cpp,
                                          // contact_constraints), not only stopped after it
   double cloth_max_substep = 1.0 / 120.0; // (s) longest automatic cloth step: cloths step at
                                          // their own, coarser rate (every few substeps)
@@ -159,7 +160,7 @@ class World {
   const Cloth& cloth(int i) const { return cloths_[i]; }
   Cloth& cloth(int i) { return cloths_[i]; }
   // the edges of cloth i, (j, k) with j < k, sorted
-  const std::vector<std::array<int, 2>>& cloth_edges(int i) const { return cloth_edges_[i]; }
+  const std::vector<std::array<int, 2>>& cloth_edges(int i) const { return cloth_contacts_[i].edges(); }
   // Makes kinematic body i follow a key track from now on (time 0 is when the world starts)
   void set_kinematic_track(int i, KinematicTrack track);
   double time() const { return time_; }  // (s) simulated so far
@@ -249,18 +250,8 @@ class World {
   bool moving_kinematic(int i) const;
   void compute_boxes(double dt);
   bool touching(int mover, int sleeper, double dt) const;
-  void collide_cloth(int c, double dt);
-  Vec3 surface_velocity(int b, const Vec3& p) const;
-  bool still_surface(int b) const;
-  double surface_friction(int c, int b) const;
-  void contact_constraints(int c, std::vector<ClothContactConstraint>& out);
-  void apply_constraint_impulses(int c, const std::vector<ClothContactConstraint>& constraints);
-  // a body's corners and edges against cloth c's triangles: calls contact(ids, w, xc, normal, phi) per contact
-  template <class Contact>
-  bool collide_features(int c, int b, double dt, const Contact& contact);
-  // body b's features against cloth c (spaced for its edges), made at the first call
-  const BodyFeatures& body_features(int c, int b);
-  void hold_pinched_bodies(int c, double dt);
+  // the bodies as a cloth's contacts see them (contact/cloth_body_contact.h; cloth_stages.cpp)
+  class ClothContactBodies;
   double cloth_penetration() const;
   int find_island(int i);
   void wake_island(int i);
@@ -319,24 +310,12 @@ class World {
   std::vector<RigidBodyState> rest_pose_;   // (nbody) where the current rest began
   std::vector<int> island_;                 // (nbody) union-find parent; for sleepers, their island
   std::vector<Cloth> cloths_;               // (ncloth) cloths and their state
-  std::vector<double> cloth_friction_;      // (ncloth) Coulomb coefficient against bodies and ground
-  std::vector<double> cloth_thickness_;     // (ncloth) distance kept from surfaces and itself (m)
+  std::vector<ClothBodyContact> cloth_contacts_;          // (ncloth) contacts with bodies and ground: friction,
+                                                          // thickness (m, kept from surfaces and itself),
+                                                          // inverse masses, edges, and their state and scratch
   std::vector<std::optional<SelfCollision>> cloth_self_;  // (ncloth) self-collision, when on
-  std::vector<Eigen::VectorXd> cloth_inverse_mass_;       // (ncloth) (nvert) 1/kg, 0 when pinned
-  std::vector<std::vector<std::array<int, 2>>> cloth_edges_;  // (ncloth) (nedge) vertex pairs, i < j
-  std::vector<double> cloth_mean_edge_;                   // (ncloth) mean rest edge length (m)
-  std::vector<TriangleGrid> cloth_grid_;                  // (ncloth) scratch: its triangles at the candidate positions
-  // a cloth's contacts with bodies, from one step to the next (contact_constraints)
-  struct ClothTouches {
-    std::vector<Vec3> normal;  // (nvert) the sum of the normals of the contacts that pushed it this step, by weight
-    std::vector<int> body;     // (nvert) the body of the last of them (-1: the ground)
-    std::vector<char> released;  // (nvert) its constraint pulled last step: not held this step
-    std::vector<char> stuck;     // (nvert) friction stopped its slip: held in every direction
-    std::vector<int> constrained_body;  // (constraints) scratch: each constraint's body
-  };
-  std::vector<ClothTouches> cloth_touches_;               // (ncloth)
   std::vector<TriangleMesh> body_meshes_;   // (nbody) the mesh of a level-set body (BodyDesc), else empty
-  std::vector<std::vector<std::optional<BodyFeatures>>> cloth_body_features_;  // (ncloth) (nbody) made at first use
+  std::vector<ContactBody> contact_bodies_;  // (nbody) scratch: the bodies as the cloth contacts see them
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
   std::vector<ContactPoint> contacts_;      // contact points of this step's contact stage
   std::vector<int> body_scratch_;           // (nbody) reused by the stages

@@ -184,7 +184,7 @@ TEST(ClothWorld, EdgesRestOnAThinRodBetweenVertices) {
 }
 
 // A heavy box set down on a cloth lying on the ground: the cloth pinched between them holds
-// the box up as a spacer of 3 thicknesses (cloth_stages.cpp: hold_pinched_bodies), instead of the
+// the box up as a spacer of 3 thicknesses (contact/cloth_body_contact.cpp: hold_pinched_bodies), instead of the
 // box sinking through the cloth onto the ground; the cloth stays out of both
 TEST(ClothWorld, PinchedClothHoldsAHeavyBoxOffTheGround) {
   World world;

@@ -1,0 +1,506 @@
+// A cloth against the bodies and the ground (the interface is in cloth_body_contact.h).
+//
+// The cloth computes its internal forces and new velocities itself (cloth/cloth.h). The
+// contacts then make the candidate positions x + dt v respect every body and the ground: a
+// cloth point (each vertex, and each edge's quarter points, so that a pole or a box's edge
+// cannot slip between vertices) whose candidate lies closer than the cloth's thickness to a
+// surface (phi < h, with phi the body's level set at its end-of-step pose) gets the normal
+// velocity, relative to the body's point velocity, that brings it exactly to distance h at
+// the end of the step:
+//     dv_n = (h - phi) / dt   when positive (phi is taken at the candidate, so this is the
+//                              change that moves the candidate out to h: inelastic, no bounce)
+// and Coulomb friction on the relative tangential velocity, limited by that normal change
+// (Bridson, Fedkiw and Anderson 2002): v_T <- max(0, 1 - mu dv_n / |v_T|) v_T. An edge
+// point's change is shared by its two vertices in proportion to their weights and inverse
+// masses. The cloth's momentum change goes, opposite, to a dynamic body at the contact point,
+// so cloth pushes bodies back. A body's corners and points along its edges (a box's, or a
+// mesh's sharp ones) are held out of the cloth's triangles the same way
+// (contact/body_features.h), so that no body edge pokes through the inside of a triangle.
+// Resting contacts against still surfaces are also held inside the cloth's implicit solve
+// (contact_constraints, apply_constraint_impulses), and a cloth pinched between two surfaces
+// holds them apart (hold_pinched_bodies). The world calls these in its cloth step
+// (world/cloth_stages.cpp), with strain limiting and self-collision in between.
+#include "contact/cloth_body_contact.h"
+
+#include "rigid/impulse.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace simbake {
+
+namespace {
+constexpr int kGround = -1;                // a contact's body index for the ground
+constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its two surfaces apart per step
+constexpr double kPinchGap = 3.0;          // x h: the gap a pinch holds open
+constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
+constexpr double kMaxLever = 4.0;         // a contact moves no cloth vertex faster than this many times its
+                                          // point's velocity change (see collide's contact_point)
+
+// the velocity of body b's surface at point p (m/s; b < 0: the ground, at rest)
+Vec3 surface_velocity(const ContactBodies& bodies, int b, const Vec3& p) {
+  if (b < 0) return Vec3::Zero();
+  return bodies.velocity_at(b, p);
+}
+
+// the ground (b < 0), a static body or a kinematic one not moving in this step
+bool still_surface(const ContactBodies& bodies, int b) { return b < 0 || bodies.body(b).still; }
+}  // namespace
+
+ClothBodyContact::ClothBodyContact(const Cloth& cloth, double friction, double thickness)
+    : friction_(friction), thickness_(thickness) {
+  inverse_mass_ = cloth.masses().cwiseInverse();
+  for (int k = 0; k < cloth.vertex_count(); ++k) {
+    if (cloth.pinned()[k]) inverse_mass_[k] = 0.0;
+  }
+  edges_ = unique_edges(cloth.triangles());
+  double total = 0.0;
+  for (const auto& e : edges_) total += (cloth.positions().row(e[1]) - cloth.positions().row(e[0])).norm();
+  mean_edge_ = total / static_cast<double>(std::max<size_t>(1, edges_.size()));
+  touches_ = {std::vector<Vec3>(cloth.vertex_count(), Vec3::Zero()), std::vector<int>(cloth.vertex_count(), -1),
+              std::vector<char>(cloth.vertex_count(), 0), std::vector<char>(cloth.vertex_count(), 0), {}};
+}
+
+// Body b's features against the cloth, in the body's coordinates, spaced a quarter of the
+// cloth's mean edge: a box's edges and corners, or a mesh's sharp convex edges and corners
+// (contact/body_features.h); none for other shapes (a sphere has no edge). Made once per
+// (body, cloth), at the first contact pass that reaches the body. A point behind a feature
+// counts as inside the body where the body's phi is below 0, or below the level set's own
+// phi at the feature, which is above 0 where the grid rounds a sharp edge off (by a fraction
+// of a voxel: a cloth point just pierced by the mesh's edge is still outside the rounded
+// level set), at most h / 2, so that a layer held at h on the body's far side never counts
+const BodyFeatures& ClothBodyContact::body_features(const ContactBodies& bodies, int b) {
+  if (body_features_.size() < static_cast<size_t>(bodies.count())) body_features_.resize(bodies.count());
+  std::optional<BodyFeatures>& features = body_features_[b];
+  if (features) return *features;
+  features.emplace();
+  const ContactBody& body = bodies.body(b);
+  const SignedDistance* shape = body.shape;
+  const double h = thickness_, spacing = 0.25 * mean_edge_;
+  if (const auto* box = dynamic_cast<const BoxDistance*>(shape)) {
+    box_edge_features(box->half(), spacing, features->points, features->normals);
+  } else if (shape && body.mesh && body.mesh->triangles.rows() > 0) {
+    mesh_edge_features(body.mesh->vertices, body.mesh->triangles, spacing, sharp_crease_angle(h, mean_edge_),
+                       features->points, features->normals);
+  }
+  for (const Vec3& p : features->points) {
+    features->inside_below.push_back(std::clamp(shape->phi(p), 0.0, 0.5 * h));
+    features->bounds.extend(p);
+  }
+  return *features;
+}
+
+// Body b's features against the cloth's triangles at their candidate positions x + dt v
+// (contact/body_features.h), each contact applied before the next feature is looked at; each
+// goes to `contact` with the triangle's vertices and weights. The triangle grid is built for
+// the body (at the candidates as it reaches the body) over only the triangles near it: those
+// whose box, grown by the grid's margin, meets the features' box grown by a cell (a feature's
+// query reads only its own cell, so it finds what a grid over the whole cloth would). The
+// build is 9% of cloth_demo's first 60 frames in perf, about what the one grid over the
+// whole cloth per pass was
+template <class Contact>
+bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies& bodies, int b, double dt,
+                                        const Contact& contact) {
+  const BodyFeatures& features = body_features(bodies, b);
+  if (features.points.empty()) return false;
+  const SignedDistance& shape = *bodies.body(b).shape;
+  const double h = thickness_, edge = mean_edge_;
+  const Triangles& triangles = cloth.triangles();
+  const Pose& pose = bodies.body(b).pose;
+  Box3 region;
+  for (int k = 0; k < 8; ++k) region.extend(pose.apply(features.bounds.corner(static_cast<Box3::CornerType>(k))));
+  region.min().array() -= edge;
+  region.max().array() += edge;
+  grid_.build(cloth.positions() + dt * cloth.velocities(), triangles, edge, 2.0 * h, region);
+  const auto candidate = [&](int k) {
+    return Vec3((cloth.positions().row(k) + dt * cloth.velocities().row(k)).transpose());
+  };
+  std::vector<int> near;
+  bool touched = false;
+  for (size_t f = 0; f < features.points.size(); ++f) {
+    const Vec3 p = pose.apply(features.points[f]), nf = pose.rotation * features.normals[f];
+    grid_.query(p, near);
+    for (int t : near) {
+      const int ids[3] = {triangles(t, 0), triangles(t, 1), triangles(t, 2)};
+      Vec3 w, normal;
+      double phi;
+      if (!feature_against_triangle(p, nf, candidate(ids[0]), candidate(ids[1]), candidate(ids[2]), h, edge, w,
+                                    normal, phi)) {
+        continue;
+      }
+      // a plane behind the feature is the cloth pierced only if its point there is inside the
+      // body (not a layer on the body's far side)
+      const Vec3 xc = p + phi * normal;
+      if (phi < 0.0 && shape.phi(pose.apply_inverse(xc)) >= features.inside_below[f]) continue;
+      const double weights[3] = {w[0], w[1], w[2]};
+      contact(ids, weights, xc, normal, phi);
+      touched = true;
+    }
+  }
+  return touched;
+}
+
+// the Coulomb coefficient between the cloth and body b (b < 0: the ground): sqrt(mu_a mu_b)
+double ClothBodyContact::surface_friction(const ContactBodies& bodies, int b) const {
+  return std::sqrt(friction_ * (b < 0 ? bodies.ground()->friction : bodies.body(b).friction));
+}
+
+// The contacts the cloth's implicit solve holds (WorldSettings::cloth_contacts_in_solve; Baraff
+// and Witkin 1998, 5.3), against still surfaces (the ground, static bodies and kinematic ones
+// not moving in this step; still_surface):
+// each free vertex a contact pushed in the last step (collide: its own contact, or one of
+// an edge point or of a body's feature it shares; or this stage's own hold, when the surface
+// pushed), unless the surface had to pull then. Its velocity along the contacts' mean normal
+// becomes the surface's; if friction stopped its slip (and the solve's hold needed no more than
+// the friction cone allowed), across the normal too (static friction). The rest of the cloth
+// then answers to the held vertices inside the solve. Without it, the solve lets a resting
+// vertex fall (or slide) with its neighbours, the contacts stop it alone after the solve, and
+// its edges stretch by their relative speed times the step, every step: the 33 x 33 drape at
+// 2000 N/m with strain limiting off rests at 19% strain (median over its last 2 s; 4.2% held;
+// benchmarks/cloth/strain_trace.py); a sheet laid on the sphere 9.2% (4.3% held, 1.2% by short
+// explicit steps; ClothWorld.ContactsHeldInTheSolve...).
+// Moving bodies are left to collide: held to a dynamic body's velocity before the body
+// had answered, a hammock's ball kept bouncing (0.5 m/s after 2.5 s, against < 0.15); held to
+// a keyed body's surface velocity at the step's start, a cape on a box spinning at 30 rad/s
+// went 4.5 mm into it, and static friction and landings against a keyed ball crossing a
+// curtain at 5 and 20 m/s sent vertices 17 m in a frame. Landings are not predicted: holding
+// the vertices that would come within h of a surface during the step (at x + dt v + dt^2 g)
+// to land at h flung vertices of the 257 x 257 drape as its corners hit the ground (the
+// self-collision search then took 12 GB and minutes a frame).
+void ClothBodyContact::contact_constraints(const Cloth& cloth, const ContactBodies& bodies,
+                                           std::vector<ClothContactConstraint>& out) {
+  const Points& x = cloth.positions();
+  const std::vector<char>& pinned = cloth.pinned();
+  const int n = cloth.vertex_count();
+  Touches& touches = touches_;
+  out.clear();
+  touches.constrained_body.clear();
+  for (int k = 0; k < n; ++k) {
+    const Vec3 sum = touches.normal[k];
+    if (pinned[k] || touches.released[k] || !(sum.squaredNorm() > 0.0)) continue;
+    const Vec3 normal = sum.normalized();
+    const int body = touches.body[k];
+    const Vec3 surface = surface_velocity(bodies, body, x.row(k).transpose());
+    ClothContactConstraint held;
+    held.vertex = k;
+    held.normal = normal;
+    held.speed = surface.dot(normal);
+    held.stick = touches.stuck[k];
+    held.surface_velocity = surface;
+    out.push_back(held);
+    touches.constrained_body.push_back(body);
+  }
+  // this step's contacts are recorded afresh
+  std::fill(touches.normal.begin(), touches.normal.end(), Vec3::Zero());
+  std::fill(touches.stuck.begin(), touches.stuck.end(), 0);
+}
+
+// After the solve, for each held vertex: one the surface had to pull is let go in the next
+// step. One the surface pushed is held again in the next (it rests there now, so no contact
+// after the solve may touch it) and gets Coulomb friction from the solve's normal impulse
+// (Bridson, Fedkiw and Anderson 2002, as collide's): a sliding one's slip relative to
+// the surface reduced by mu times that impulse over the mass, at most to zero (then it sticks
+// in the next step); a sticking one keeps the surface's velocity, and slides from the next
+// step on if the solve needed more than mu times the normal impulse across it
+void ClothBodyContact::apply_constraint_impulses(Cloth& cloth, const ContactBodies& bodies,
+                                                 const std::vector<ClothContactConstraint>& constraints) {
+  Touches& touches = touches_;
+  std::fill(touches.released.begin(), touches.released.end(), 0);
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const ClothContactConstraint& k = constraints[i];
+    if (k.impulse < 0.0) {
+      touches.released[k.vertex] = 1;
+      continue;
+    }
+    const int b = touches.constrained_body[i];
+    touches.normal[k.vertex] += k.normal;
+    touches.body[k.vertex] = b;
+    const double mu = surface_friction(bodies, b);
+    const double m = cloth.masses()[k.vertex];
+    auto v = cloth.velocities().row(k.vertex);
+    if (k.stick) {
+      // (past the cone it slides from the next step on: the rest of the cloth has already
+      // answered to it held, so giving the excess back to the vertex alone would hand it the
+      // pull of all the cloth it held; a light corner vertex holding a hanging sheet flew off
+      // at 40 m/s that way)
+      touches.stuck[k.vertex] = k.friction.norm() <= mu * k.impulse;
+      continue;
+    }
+    const Vec3 p = cloth.positions().row(k.vertex).transpose();
+    const Vec3 relative = Vec3(v.transpose()) - surface_velocity(bodies, b, p);
+    const Vec3 slip = relative - relative.dot(k.normal) * k.normal;
+    const double speed = slip.norm(), stop = mu * k.impulse / m;
+    if (stop >= speed) {
+      touches.stuck[k.vertex] = 1;
+      v -= slip.transpose();
+    } else {
+      v -= (stop / speed) * slip.transpose();
+    }
+  }
+}
+
+void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
+  const Points& x = cloth.positions();
+  Points& v = cloth.velocities();
+  const std::vector<char>& pinned = cloth.pinned();
+  const double h = thickness_;
+  const int n = cloth.vertex_count();
+
+  // the cloth's box over the step, to skip bodies it cannot reach
+  Box3 reach;
+  for (int k = 0; k < n; ++k) {
+    reach.extend(Vec3(x.row(k).transpose()));
+    reach.extend(Vec3((x.row(k) + dt * v.row(k)).transpose()));
+  }
+  reach.min().array() -= h;
+  reach.max().array() += h;
+
+  // one contact of a point of the cloth (a vertex, or a point along an edge: vertices `ids`
+  // with weights `w`): push the point out to distance h, friction on its relative slip,
+  // shared by its vertices in proportion to weight and inverse mass (pinned ones take none),
+  // and the opposite momentum to the body (body < 0: the ground)
+  const Eigen::VectorXd& inverse_mass = inverse_mass_;
+  Touches& touches = touches_;
+  auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc,
+                           const Vec3& normal, double phi, double mu) {
+    double denom = 0.0, weight = 0.0, lever = 0.0;
+    Vec3 point_velocity = Vec3::Zero();
+    for (int i = 0; i < count; ++i) {
+      denom += w[i] * w[i] * inverse_mass[ids[i]];
+      if (inverse_mass[ids[i]] > 0.0) weight += w[i];
+      point_velocity += w[i] * v.row(ids[i]).transpose();
+    }
+    if (denom <= 0.0) return;
+    // how much faster than the point its fastest vertex must move: 1 for a vertex or a point
+    // of a free triangle, 3 at the centroid of a triangle with two pinned vertices, and
+    // without bound as the point nears a pinned vertex (a lever about the pins: a flag pole's
+    // corner on a triangle by the pins sent its free vertex to 1e15 m/s). Past kMaxLever the
+    // pins hold the point: scaling the push down instead only spread the blow-up over the
+    // strain-collision passes, each pushing again while the point stays inside
+    for (int i = 0; i < count; ++i) lever = std::max(lever, w[i] * inverse_mass[ids[i]] / denom);
+    if (lever > kMaxLever) return;
+    const Vec3 relative = point_velocity - surface_velocity(bodies, body, xc);
+    const double vn = relative.dot(normal);
+    const double dvn = (h - phi) / dt;
+    if (dvn <= 0.0) return;
+    Vec3 slip = relative - vn * normal;
+    const double slip_speed = slip.norm();
+    const bool stuck = mu * dvn >= slip_speed;
+    if (slip_speed > 0.0) slip *= std::max(0.0, 1.0 - mu * dvn / slip_speed);
+    const Vec3 change = (vn + dvn) * normal + slip - relative;  // of the point's velocity
+    for (int i = 0; i < count; ++i) {
+      v.row(ids[i]) += (w[i] * inverse_mass[ids[i]] / denom) * change.transpose();
+      if (w[i] > 0.0 && inverse_mass[ids[i]] > 0.0 && still_surface(bodies, body)) {
+        touches.normal[ids[i]] += w[i] * normal;
+        touches.body[ids[i]] = body;
+        touches.stuck[ids[i]] = stuck;
+      }
+    }
+    if (body >= 0 && !bodies.body(body).kinematic && !bodies.asleep(body)) {
+      const Vec3 J = (weight / denom) * change;  // the cloth's momentum change; the body takes -J
+      bodies.apply_impulse(body, xc, -J);
+    }
+  };
+  auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+    const double one = 1.0;
+    contact_point(&k, &one, 1, body, xc, normal, phi, mu);
+  };
+
+  for (int b = 0; b < bodies.count(); ++b) {
+    const ContactBody& body = bodies.body(b);
+    if (!body.shape) continue;
+    const Pose& pose = body.pose;
+    Box3 local = body.shape->bounds();
+    local.min().array() -= h;
+    local.max().array() += h;
+    const double radius = body.bounding_radius + h;
+    // quick reject: the body's bounding sphere misses the cloth's box
+    const Vec3 nearest = body.center.cwiseMax(reach.min()).cwiseMin(reach.max());
+    if ((nearest - body.center).norm() > radius) continue;
+    const double mu = surface_friction(bodies, b);
+    bool touched = false;
+    for (int k = 0; k < n; ++k) {
+      if (pinned[k]) continue;
+      const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+      const Vec3 p = pose.apply_inverse(xc);
+      if (!local.contains(p)) continue;
+      Vec3 n_local;
+      const double phi = body.shape->phi_and_normal(p, n_local);
+      if (phi >= h) continue;
+      contact(k, b, xc, pose.rotation * n_local, phi, mu);
+      touched = true;
+    }
+    // points along the edges (a pole or a box's edge between vertices), at their quarters
+    for (const auto& e : edges_) {
+      if (pinned[e[0]] && pinned[e[1]]) continue;
+      const Vec3 a = (x.row(e[0]) + dt * v.row(e[0])).transpose();
+      const Vec3 d = (x.row(e[1]) + dt * v.row(e[1])).transpose() - a;
+      for (double s : {0.25, 0.5, 0.75}) {
+        const Vec3 xc = a + s * d;
+        const Vec3 p = pose.apply_inverse(xc);
+        if (!local.contains(p)) continue;
+        Vec3 n_local;
+        const double phi = body.shape->phi_and_normal(p, n_local);
+        if (phi >= h) continue;
+        const double w[2] = {1.0 - s, s};
+        contact_point(e.data(), w, 2, b, xc, pose.rotation * n_local, phi, mu);
+        touched = true;
+      }
+    }
+    // the body's corners and edges against the cloth's triangles
+    touched |= collide_features(cloth, bodies, b, dt,
+                                [&](const int* ids, const double* w, const Vec3& xc, const Vec3& normal, double phi) {
+                                  contact_point(ids, w, 3, b, xc, normal, phi, mu);
+                                });
+    if (touched && bodies.asleep(b)) bodies.wake(b);
+  }
+  if (const ContactGround* ground = bodies.ground()) {
+    const double mu = surface_friction(bodies, -1);
+    for (int k = 0; k < n; ++k) {
+      if (pinned[k]) continue;
+      const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+      const double phi = xc.y() - ground->height;
+      if (phi < h) contact(k, -1, xc, Vec3::UnitY(), phi, mu);
+    }
+  }
+}
+
+// Cloth pinched between two surfaces (two bodies, or a body and the ground): a vertex
+// between two surfaces facing each other whose gap along it is under kPinchGap h cannot
+// be pushed out of either without going into the other or into a layer of itself
+// (cloth_demo: the sheet falls, folded, into the gap between a resting sphere and a box;
+// the box's contacts, after the sphere's, and self-collision's last word left it up to
+// 12.7 mm inside the sphere), and its light vertices' momentum cannot push a heavy body
+// away. The rigid solver does not see the cloth, so here the pinch acts on the two bodies
+// as a rigid spacer of width kPinchGap h (3h: h from each surface and h between two layers,
+// as where the sheet folds into the gap; a 2h spacer, one layer, left 3.5 mm): Gauss-Seidel
+// sweeps of equal and opposite impulses (split below into a real and a pseudo part) at the
+// vertex along n = (n_a - n_b) / |n_a - n_b| (n_a, n_b the surfaces' outward normals),
+// each bringing the bodies' relative velocity there, along n, to the speed that opens the
+// gap phi_a + phi_b to kPinchGap h over the step, at most kPinchSpeed (a deep start is
+// cleared over a few steps). Immovable surfaces (the ground, kinematic or sleeping bodies)
+// take nothing; a pinch between two of them is left alone. A dynamic body resting on cloth
+// on the ground so rests 3h above the ground.
+void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bodies, double dt) {
+  const Points& x = cloth.positions();
+  const Points& v = cloth.velocities();
+  const double h = thickness_;
+  const int n = cloth.vertex_count();
+  const auto movable_body = [&](int b) { return b >= 0 && !bodies.body(b).kinematic && !bodies.asleep(b); };
+  // the bodies the cloth may touch, and whether any of them can move
+  Box3 reach;
+  for (int k = 0; k < n; ++k) reach.extend(Vec3((x.row(k) + dt * v.row(k)).transpose()));
+  reach.min().array() -= h;
+  reach.max().array() += h;
+  std::vector<int> near;
+  bool any_movable = false;
+  for (int b = 0; b < bodies.count(); ++b) {
+    const ContactBody& body = bodies.body(b);
+    if (!body.shape) continue;
+    const Vec3 nearest = body.center.cwiseMax(reach.min()).cwiseMin(reach.max());
+    if ((nearest - body.center).norm() > body.bounding_radius + h) continue;
+    near.push_back(b);
+    any_movable = any_movable || movable_body(b);
+  }
+  if (!any_movable) return;
+  const ContactGround* ground = bodies.ground();
+  struct Touch {
+    int body;  // kGround for the ground
+    Vec3 normal;
+    double phi;
+  };
+  struct Pinch {
+    Vec3 point;
+    int a, b;
+    Vec3 normal;  // from a towards b
+    double gap;   // phi_a + phi_b
+  };
+  std::vector<Pinch> pinches;
+  std::vector<Touch> touches;
+  for (int k = 0; k < n; ++k) {
+    if (cloth.pinned()[k]) continue;
+    const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+    touches.clear();
+    for (size_t i = 0; i < near.size(); ++i) {
+      const ContactBody& body = bodies.body(near[i]);
+      const Vec3 p = body.pose.apply_inverse(xc);
+      Box3 local = body.shape->bounds();
+      local.min().array() -= kPinchGap * h;
+      local.max().array() += kPinchGap * h;
+      if (!local.contains(p)) continue;
+      Vec3 n_local;
+      const double phi = body.shape->phi_and_normal(p, n_local);
+      if (phi < kPinchGap * h) touches.push_back({near[i], body.pose.rotation * n_local, phi});
+    }
+    if (touches.empty()) continue;
+    if (ground && xc.y() - ground->height < kPinchGap * h) {
+      touches.push_back({kGround, Vec3::UnitY(), xc.y() - ground->height});
+    }
+    // a pair is a pinch where the two surfaces face each other and the gap between them
+    // along the vertex is under kPinchGap h (no need for the vertex to be closer than h to
+    // either: cloth resting exactly at h on the ground under a box then switched the pinch
+    // off and on, and the box jittered and walked at 1.3 cm/s)
+    for (size_t i = 0; i < touches.size(); ++i) {
+      for (size_t j = i + 1; j < touches.size(); ++j) {
+        const Touch& a = touches[i];
+        const Touch& b = touches[j];
+        if (!movable_body(a.body) && !movable_body(b.body)) continue;
+        if (a.phi + b.phi >= kPinchGap * h || a.normal.dot(b.normal) >= 0.0) continue;
+        pinches.push_back({xc, a.body, b.body, (a.normal - b.normal).normalized(), a.phi + b.phi});
+      }
+    }
+  }
+  if (pinches.empty()) return;
+  // two parts (split impulses): a real one that stops the surfaces closing in on the
+  // vertex (inelastic: no bounce off the cloth), and a pseudo-velocity one, applied to the
+  // bodies' positions only, that opens the gap: a body is put in place, not thrown
+  const int body_count = bodies.count();
+  std::vector<Vec3> pseudo_v(body_count, Vec3::Zero()), pseudo_w(body_count, Vec3::Zero());
+  std::vector<Mat3> inverse_inertia(body_count, Mat3::Zero());
+  for (int b : near) {
+    if (movable_body(b)) inverse_inertia[b] = bodies.inverse_inertia(b);
+  }
+  const auto pseudo_at = [&](int b, const Vec3& p) -> Vec3 {
+    return b < 0 ? Vec3::Zero() : Vec3(pseudo_v[b] + pseudo_w[b].cross(p - bodies.body(b).center));
+  };
+  const auto k_normal = [&](const Pinch& pinch) {
+    Mat3 K = Mat3::Zero();
+    for (int b : {pinch.a, pinch.b}) {
+      if (movable_body(b)) {
+        K += impulse_matrix(bodies.body(b).inverse_mass, inverse_inertia[b], pinch.point - bodies.body(b).center);
+      }
+    }
+    return pinch.normal.dot(K * pinch.normal);
+  };
+  std::vector<char> moved(body_count, 0);
+  for (int sweep = 0; sweep < kPinchSweeps; ++sweep) {
+    for (const Pinch& pinch : pinches) {
+      const double kn = k_normal(pinch);
+      if (!(kn > 0.0)) continue;
+      // real: the surfaces stop closing in (relative normal velocity >= 0)
+      const double closing =
+          -(surface_velocity(bodies, pinch.b, pinch.point) - surface_velocity(bodies, pinch.a, pinch.point))
+               .dot(pinch.normal);
+      // pseudo: the gap opens to kPinchGap h over the step, at most kPinchSpeed
+      const double target = std::min((kPinchGap * h - pinch.gap) / dt, kPinchSpeed);
+      const double opening = (pseudo_at(pinch.b, pinch.point) - pseudo_at(pinch.a, pinch.point)).dot(pinch.normal);
+      const double real = std::max(0.0, closing) / kn, pseudo = std::max(0.0, target - opening) / kn;
+      if (real <= 0.0 && pseudo <= 0.0) continue;
+      for (const auto& [b, sign] : {std::pair<int, double>{pinch.b, 1.0}, std::pair<int, double>{pinch.a, -1.0}}) {
+        if (!movable_body(b)) continue;
+        const Vec3 r = pinch.point - bodies.body(b).center;
+        const Vec3 J = sign * real * pinch.normal, P = sign * pseudo * pinch.normal;  // to body b
+        bodies.apply_impulse(b, pinch.point, J);
+        pseudo_v[b] += bodies.body(b).inverse_mass * P;
+        pseudo_w[b] += inverse_inertia[b] * r.cross(P);
+        moved[b] = 1;
+      }
+    }
+  }
+  for (int b : near) {
+    if (!moved[b]) continue;
+    bodies.displace(b, pseudo_v[b], pseudo_w[b], dt);
+  }
+}
+
+}  // namespace simbake

@@ -1,0 +1,183 @@
+// A cloth against bodies and the ground (contact/cloth_body_contact.h), without a World: the
+// bodies are a plain ContactBodies written here. A free cloth vertex whose candidate x + dt v
+// lies inside the ground or a sphere gets the normal velocity change dv_n = (h - phi) / dt,
+// which leaves its candidate exactly at the thickness h, and Coulomb friction takes mu dv_n
+// off its slip (or stops it); against a dynamic body the cloth's momentum change goes to the
+// body, opposite, so their total momentum is unchanged; a sleeping body is woken, not pushed.
+#include <gtest/gtest.h>
+
+#include "contact/cloth_body_contact.h"
+
+#include <cmath>
+#include <optional>
+#include <vector>
+
+using namespace simbake;
+
+namespace {
+
+// Bodies as plain arrays: a dynamic body's angular velocity is I^-1 L with a constant I^-1
+class PlainBodies final : public ContactBodies {
+ public:
+  std::vector<ContactBody> bodies;
+  std::vector<Vec3> v, l;              // (nbody) linear velocity (m/s), angular momentum (N m s)
+  std::vector<Mat3> inverse_inertia_;  // (nbody) world I^-1 (1/(kg m^2))
+  std::vector<char> asleep_;
+  std::optional<ContactGround> ground_;
+
+  void add(const ContactBody& body, const Mat3& inverse_inertia) {
+    bodies.push_back(body);
+    v.push_back(Vec3::Zero());
+    l.push_back(Vec3::Zero());
+    inverse_inertia_.push_back(inverse_inertia);
+    asleep_.push_back(0);
+  }
+  int count() const override { return static_cast<int>(bodies.size()); }
+  const ContactBody& body(int b) const override { return bodies[b]; }
+  const ContactGround* ground() const override { return ground_ ? &*ground_ : nullptr; }
+  bool asleep(int b) const override { return asleep_[b] != 0; }
+  void wake(int b) override { asleep_[b] = 0; }
+  Vec3 velocity_at(int b, const Vec3& p) const override {
+    return v[b] + (inverse_inertia_[b] * l[b]).cross(p - bodies[b].center);
+  }
+  void apply_impulse(int b, const Vec3& p, const Vec3& J) override {
+    v[b] += bodies[b].inverse_mass * J;
+    l[b] += (p - bodies[b].center).cross(J);
+  }
+  Mat3 inverse_inertia(int b) const override { return inverse_inertia_[b]; }
+  void displace(int b, const Vec3& velocity, const Vec3&, double dt) override {
+    bodies[b].center += dt * velocity;
+    bodies[b].pose.translation += dt * velocity;
+  }
+};
+
+// One triangle: vertex 0 free at `free`, vertices 1 and 2 pinned 1 m above it, so that
+// only vertex 0 comes near a surface (its edges' quarter points stay 0.25 m away)
+Cloth one_free_vertex(const Vec3& free) {
+  ClothDesc desc;
+  desc.rest.resize(3, 3);
+  desc.rest.row(0) = free.transpose();
+  desc.rest.row(1) = (free + Vec3(0.0, 1.0, 0.0)).transpose();
+  desc.rest.row(2) = (free + Vec3(1.0, 1.0, 0.0)).transpose();
+  desc.triangles.resize(1, 3);
+  desc.triangles << 0, 1, 2;
+  desc.pinned = {1, 2};
+  return Cloth(desc);
+}
+
+ContactBody sphere(const SphereDistance& shape, double radius, const Vec3& center, double inverse_mass) {
+  ContactBody body;
+  body.shape = &shape;
+  body.pose.translation = center;
+  body.center = center;
+  body.bounding_radius = radius;
+  body.friction = 0.5;
+  body.inverse_mass = inverse_mass;
+  body.kinematic = inverse_mass == 0.0;
+  body.still = body.kinematic;
+  return body;
+}
+
+}  // namespace
+
+// On the ground (friction 0.5 each, so mu = 0.5): a vertex at h + dt falling at 2 m/s has its
+// candidate at h - dt, phi = h - dt, so dv_n = 1 m/s and it ends the step exactly at h; its
+// slip of 3 m/s loses mu dv_n = 0.5 m/s, a slip of 0.3 m/s (under 0.5) stops. At three steps
+TEST(ClothBodyContact, GroundStopsAVertexAtTheThicknessWithCoulombFriction) {
+  const double h = 0.005;
+  for (double dt : {1e-3, 4e-3, 1e-2}) {
+    for (double slip : {3.0, 0.3}) {
+      Cloth cloth = one_free_vertex(Vec3(0.0, h + dt, 0.0));
+      cloth.velocities().row(0) << slip, -2.0, 0.0;
+      ClothBodyContact contact(cloth, 0.5, h);
+      PlainBodies bodies;
+      bodies.ground_ = ContactGround{0.0, 0.5};
+      contact.collide(cloth, bodies, dt);
+      const Vec3 v = cloth.velocities().row(0).transpose();
+      EXPECT_NEAR(v.y(), -1.0, 1e-12) << dt;
+      EXPECT_NEAR(cloth.positions()(0, 1) + dt * v.y(), h, 1e-15) << dt;
+      EXPECT_NEAR(v.x(), std::max(0.0, slip - 0.5 * 1.0), 1e-12) << dt << " " << slip;
+      EXPECT_EQ(v.z(), 0.0);
+      // the pinned vertices took nothing
+      EXPECT_EQ(cloth.velocities().bottomRows(2).norm(), 0.0);
+    }
+  }
+}
+
+// A vertex falling straight onto a static sphere (radius 0.5) from above its top ends the
+// step exactly at the thickness from the sphere's surface
+TEST(ClothBodyContact, StaticSphereStopsAVertexAtTheThickness) {
+  const double h = 0.005, r = 0.5;
+  const SphereDistance shape(r);
+  for (double dt : {1e-3, 4e-3, 1e-2}) {
+    Cloth cloth = one_free_vertex(Vec3(0.0, r + h + dt, 0.0));
+    cloth.velocities().row(0) << 0.0, -2.0, 0.0;
+    ClothBodyContact contact(cloth, 0.5, h);
+    PlainBodies bodies;
+    bodies.add(sphere(shape, r, Vec3::Zero(), 0.0), Mat3::Zero());
+    contact.collide(cloth, bodies, dt);
+    const Vec3 candidate = (cloth.positions().row(0) + dt * cloth.velocities().row(0)).transpose();
+    EXPECT_NEAR(candidate.norm() - r, h, 1e-14) << dt;
+    EXPECT_NEAR(cloth.velocities()(0, 1), -1.0, 1e-11) << dt;
+  }
+}
+
+// Against a dynamic sphere (2 kg), hit off its top with slip: the vertex's velocity along the
+// contact normal changes by dv_n = (h - phi) / dt, its slip relative to the sphere loses
+// mu dv_n, and the sphere takes the opposite momentum (the cloth's and the sphere's momentum
+// changes sum to zero) and the matching angular momentum about its centre
+TEST(ClothBodyContact, DynamicSphereTakesTheOppositeMomentum) {
+  const double h = 0.005, r = 0.5, mass = 2.0, mu = 0.5;
+  const SphereDistance shape(r);
+  const Mat3 inverse_inertia = Mat3::Identity() / (0.4 * mass * r * r);
+  for (double dt : {1e-3, 4e-3, 1e-2}) {
+    const Vec3 start(0.01, r + h + 0.5 * dt, -0.005);
+    const Vec3 v0(1.5, -2.0, 0.5);
+    Cloth cloth = one_free_vertex(start);
+    cloth.velocities().row(0) = v0.transpose();
+    ClothBodyContact contact(cloth, mu, h);
+    PlainBodies bodies;
+    bodies.add(sphere(shape, r, Vec3::Zero(), 1.0 / mass), inverse_inertia);
+    bodies.bodies[0].friction = mu;  // mu = sqrt(mu mu)
+    // what the contact should do, from the candidate (the sphere at rest)
+    const Vec3 xc = start + dt * v0;
+    const Vec3 normal = xc.normalized();
+    const double phi = xc.norm() - r, dvn = (h - phi) / dt;
+    ASSERT_GT(dvn, 0.0);
+    const Vec3 slip = v0 - v0.dot(normal) * normal;
+    ASSERT_GT(slip.norm(), mu * dvn);  // it slides
+
+    contact.collide(cloth, bodies, dt);
+    const Vec3 v = cloth.velocities().row(0).transpose();
+    const double m = cloth.masses()[0];
+    EXPECT_NEAR((v - v0).dot(normal), dvn, 1e-9) << dt;
+    const Vec3 slip_after = v - v.dot(normal) * normal;
+    EXPECT_NEAR(slip_after.norm(), slip.norm() - mu * dvn, 1e-9) << dt;
+    EXPECT_LT((slip_after.normalized() - slip.normalized()).norm(), 1e-12) << dt;
+    // momentum: the cloth's change plus the body's is zero
+    const Vec3 cloth_change = m * (v - v0);
+    EXPECT_LT((cloth_change + mass * bodies.v[0]).norm(), 1e-15 * (1.0 + cloth_change.norm())) << dt;
+    EXPECT_GT(bodies.v[0].norm(), 0.0);
+    EXPECT_LT((bodies.l[0] + xc.cross(cloth_change)).norm(), 1e-15) << dt;
+  }
+}
+
+// A sleeping dynamic body is woken by the touch but takes no impulse in it; a kinematic one
+// takes none either (the cloth is stopped all the same)
+TEST(ClothBodyContact, SleepingAndKinematicBodiesTakeNothing) {
+  const double h = 0.005, r = 0.5, dt = 4e-3;
+  const SphereDistance shape(r);
+  for (bool kinematic : {false, true}) {
+    Cloth cloth = one_free_vertex(Vec3(0.0, r + h + dt, 0.0));
+    cloth.velocities().row(0) << 0.0, -2.0, 0.0;
+    ClothBodyContact contact(cloth, 0.5, h);
+    PlainBodies bodies;
+    bodies.add(sphere(shape, r, Vec3::Zero(), kinematic ? 0.0 : 0.5), Mat3::Identity());
+    bodies.asleep_[0] = !kinematic;
+    contact.collide(cloth, bodies, dt);
+    EXPECT_NEAR(cloth.velocities()(0, 1), -1.0, 1e-11);
+    EXPECT_EQ(bodies.v[0].norm(), 0.0);
+    EXPECT_EQ(bodies.l[0].norm(), 0.0);
+    EXPECT_FALSE(bodies.asleep(0));
+  }
+}
