@@ -121,13 +121,20 @@ void World::step_cloths(double dt) {
                            stats_.self_collision, passes);
     };
     {
+      // the contacts the solve holds, and their friction after it, are contacts' time
       std::vector<ClothContactConstraint> constraints;
-      if (settings_.cloth_contacts_in_solve) contact.contact_constraints(cloth, bodies, constraints);
+      if (settings_.cloth_contacts_in_solve) {
+        ScopedTimer timer(profile_.cloth_contacts);
+        contact.contact_constraints(cloth, bodies, constraints);
+      }
       {
         ScopedTimer timer(profile_.cloth_forces);
         cloth.update_velocities(dt, settings_.gravity, &constraints);
       }
-      contact.apply_constraint_impulses(cloth, bodies, constraints);
+      {
+        ScopedTimer timer(profile_.cloth_contacts);
+        contact.apply_constraint_impulses(cloth, bodies, constraints);
+      }
     }
     collide_cloth();
     if (self) repel();
