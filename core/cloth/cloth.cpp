@@ -680,7 +680,7 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
     const Points p = x_ + dt * v_;
     // lengths now; new violations become active; the largest error decides whether to go on
     std::vector<double> length(count);
-    double worst = 0.0;
+    double worst = 0.0, violation = 0.0;  // the largest error (x L), and the errors' squares summed (the line search's)
     for (int q = 0; q < count; ++q) {
       const cloth_detail::Edge& e = edges[q];
       if (inverse_mass(e.i, held) + inverse_mass(e.j, held) == 0.0) continue;
@@ -689,6 +689,7 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
       if (bound >= 0.0) {
         target[q] = bound;
         worst = std::max(worst, std::abs(length[q] - bound) / e.rest);
+        violation += (length[q] - bound) * (length[q] - bound);
       }
     }
     if (worst < kStrainTolerance) return;
@@ -774,9 +775,8 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
     // still moved at 6 m/s: 580% strain) one sent that vertex off at 57 m/s with 7,450%
     // strain, on a path that a change of round-off alone picked (README limitations);
     // ClothStrainLimit.GlobalPassNeverLeavesTheEdgesFurtherPastTheirBounds has sheets like it
-    const double before = bound_violation(length, held);
     double scale = 1.0;
-    for (int halving = 0; bound_violation(p + scale * move, held) > before; ++halving) {
+    for (int halving = 0; bound_violation(p + scale * move, held) > violation; ++halving) {
       if (halving == kLineSearchHalvings) return;  // no step helps: the sweeps have done what they could
       scale *= 0.5;
     }
@@ -785,26 +785,18 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
 }
 
 // The sum over the edges (those with a free end) of the squared distance by which each is
-// past its bound (strain_target), from the lengths or from candidate positions
-double Cloth::bound_violation(const std::vector<double>& length, const std::vector<char>* held) const {
-  const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
+// past its bound (strain_target) at candidate positions p, as project_strain sums it
+double Cloth::bound_violation(const Points& p, const std::vector<char>* held) const {
   const double limit = model_->material.strain_limit;
   const bool enforce = model_->material.compression == CompressionMode::kEnforce;
   double sum = 0.0;
-  for (size_t q = 0; q < edges.size(); ++q) {
-    const cloth_detail::Edge& e = edges[q];
+  for (const cloth_detail::Edge& e : model_->forces->edges()) {
     if (inverse_mass(e.i, held) + inverse_mass(e.j, held) == 0.0) continue;
-    const double bound = strain_target(length[q], e.rest, limit, enforce);
-    if (bound >= 0.0) sum += (length[q] - bound) * (length[q] - bound);
+    const double length = (row(p, e.j) - row(p, e.i)).norm();
+    const double bound = strain_target(length, e.rest, limit, enforce);
+    if (bound >= 0.0) sum += (length - bound) * (length - bound);
   }
   return sum;
-}
-
-double Cloth::bound_violation(const Points& p, const std::vector<char>* held) const {
-  const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
-  std::vector<double> length(edges.size(), 0.0);
-  for (size_t q = 0; q < edges.size(); ++q) length[q] = (row(p, edges[q].j) - row(p, edges[q].i)).norm();
-  return bound_violation(length, held);
 }
 
 // ---- stage: positions

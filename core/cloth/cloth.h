@@ -105,9 +105,8 @@ class Cloth {
   double inverse_mass(int k, const std::vector<char>* held) const;
   double strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held);
   void project_strain(double dt, const std::vector<char>* held);
-  // the sum of the squared distances by which the edges are past their bounds (project_strain's
-  // line search), at these lengths (one per edge) or at positions p
-  double bound_violation(const std::vector<double>& length, const std::vector<char>* held) const;
+  // the sum of the squared distances by which the edges are past their bounds at candidate
+  // positions p (project_strain's line search)
   double bound_violation(const Points& p, const std::vector<char>* held) const;
 };
 

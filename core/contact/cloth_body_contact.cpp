@@ -45,6 +45,12 @@ Vec3 surface_velocity(const ContactBodies& bodies, int b, const Vec3& p) {
 
 // the ground (b < 0), a static body or a kinematic one not moving in this step
 bool still_surface(const ContactBodies& bodies, int b) { return b < 0 || bodies.body(b).still; }
+
+// the quick reject: the body's bounding sphere, grown by h, misses the cloth's box `reach`
+bool out_of_reach(const ContactBody& body, const Box3& reach, double h) {
+  const Vec3 nearest = body.center.cwiseMax(reach.min()).cwiseMin(reach.max());
+  return (nearest - body.center).norm() > body.bounding_radius + h;
+}
 }  // namespace
 
 ClothBodyContact::ClothBodyContact(const Cloth& cloth, double friction, double thickness)
@@ -313,10 +319,7 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
     Box3 local = body.shape->bounds();
     local.min().array() -= h;
     local.max().array() += h;
-    const double radius = body.bounding_radius + h;
-    // quick reject: the body's bounding sphere misses the cloth's box
-    const Vec3 nearest = body.center.cwiseMax(reach.min()).cwiseMin(reach.max());
-    if ((nearest - body.center).norm() > radius) continue;
+    if (out_of_reach(body, reach, h)) continue;
     const double mu = surface_friction(bodies, b);
     bool touched = false;
     for (int k = 0; k < n; ++k) {
@@ -397,8 +400,7 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
   for (int b = 0; b < bodies.count(); ++b) {
     const ContactBody& body = bodies.body(b);
     if (!body.shape) continue;
-    const Vec3 nearest = body.center.cwiseMax(reach.min()).cwiseMin(reach.max());
-    if ((nearest - body.center).norm() > body.bounding_radius + h) continue;
+    if (out_of_reach(body, reach, h)) continue;
     near.push_back(b);
     any_movable = any_movable || movable_body(b);
   }

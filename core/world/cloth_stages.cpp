@@ -66,10 +66,8 @@ class World::ClothContactBodies final : public ContactBodies {
   bool asleep(int b) const override { return world_.asleep_[b] != 0; }
   void wake(int b) override { world_.wake_island(b); }
   Vec3 velocity_at(int b, const Vec3& p) const override {
-    const RigidBodyDef& def = world_.defs_[b];
     const RigidBodyState& state = world_.states_[b];
-    const Vec3 omega = def.kinematic ? world_.spin_[b] : angular_velocity(def, state);
-    return state.v + omega.cross(p - state.x);
+    return state.v + world_.body_angular_velocity(b).cross(p - state.x);
   }
   void apply_impulse(int b, const Vec3& p, const Vec3& J) override {
     RigidBodyState& state = world_.states_[b];

@@ -248,7 +248,7 @@ double World::body_travel_steps(double frame_dt, double thinnest) const {
   for (int i = 0; i < body_count(); ++i) {
     if (asleep_[i]) continue;
     const RigidBodyDef& def = defs_[i];
-    const Vec3 omega = def.kinematic ? spin_[i] : angular_velocity(def, states_[i]);
+    const Vec3 omega = body_angular_velocity(i);
     double speed = states_[i].v.norm() + omega.norm() * def.bounding_radius;
     if (!tracks_[i].empty()) {  // a keyed body: how far its track takes it over the frame
       Vec3 o0, o1;

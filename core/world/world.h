@@ -248,6 +248,10 @@ class World {
   // helpers of the stages
   bool movable(int i) const { return i != kGround && !defs_[i].kinematic && !frozen_[i]; }
   bool moving_kinematic(int i) const;
+  // body i's angular velocity now (rad/s, world): a kinematic body's prescribed spin, else from L
+  Vec3 body_angular_velocity(int i) const {
+    return defs_[i].kinematic ? spin_[i] : angular_velocity(defs_[i], states_[i]);
+  }
   void compute_boxes(double dt);
   bool touching(int mover, int sleeper, double dt) const;
   // the bodies as a cloth's contacts see them (contact/cloth_body_contact.h; cloth_stages.cpp)
