@@ -163,6 +163,7 @@ constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
 constexpr double kConstraintStiffness = 100.0;  // see implicit_velocities (any large value: it only shapes the preconditioner)
+constexpr double kSinglePrecisionTolerance = 1e-5;  // solves to this relative residual or looser multiply in single precision
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
 constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices
 // Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more,
@@ -196,6 +197,14 @@ Vec3 block_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd
   return q;
 }
 
+// (A x) at block row i from A's single-precision values, summed in double (the conjugate
+// gradients' products: bound by memory traffic, see BlockMatrix::block_f)
+Vec3 single_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& x, int i) {
+  Vec3 q = Vec3::Zero();
+  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block_f[k].cast<double>() * x.segment<3>(3 * a.column[k]);
+  return q;
+}
+
 // Constrained blocks of the implicit system: block `block`'s component along the unit
 // `normal` is fixed (Baraff and Witkin's filter S = I - n n^T there, the identity elsewhere)
 struct Filter {
@@ -217,7 +226,7 @@ void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
 }
 
 // Preconditioned conjugate gradients on the system p was last updated with (p.matrix(),
-// multiplied in 3x3 blocks), until |b - A z| < tolerance |b| or kMaxSolverIterations;
+// multiplied in 3x3 blocks of its single-precision values when the tolerance allows), until |b - A z| < tolerance |b| or kMaxSolverIterations;
 // returns the iterations, counted as Eigen's ConjugateGradient counts them (the products
 // after the first). The vector operations of each iteration are fused into two passes (the
 // product with the step's dot product, the update with the residual's norm); everything
@@ -231,7 +240,9 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
                         Eigen::VectorXd& z, const std::vector<Filter>& filter) {
   const cloth_detail::BlockMatrix& a = p.matrix();
   const Eigen::Index size = b.size();
-  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return block_row_product(a, x, i); };
+  // single precision's rounding (1e-7 of each product) would show in a tighter solve
+  const bool single = tolerance >= kSinglePrecisionTolerance;
+  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return single ? single_row_product(a, x, i) : block_row_product(a, x, i); };
   Eigen::VectorXd r = b;
   if (filter.empty()) {
     z.setZero(size);

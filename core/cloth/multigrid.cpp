@@ -213,6 +213,16 @@ BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern) {
   return m;
 }
 
+namespace {
+
+// m.block_f from m.block
+void single_precision(BlockMatrix& m) {
+  m.block_f.resize(m.block.size());
+  for (size_t k = 0; k < m.block.size(); ++k) m.block_f[k] = m.block[k].cast<float>();
+}
+
+}  // namespace
+
 void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
   const double* values = a.valuePtr();
   for (size_t k = 0; k < m.block.size(); ++k) {
@@ -223,6 +233,7 @@ void copy_values(const Eigen::SparseMatrix<double>& a, BlockMatrix& m) {
       for (int r = 0; r < 3; ++r) block(c, r) = v[c * s + r];
     }
   }
+  single_precision(m);
 }
 
 // ---- block-Jacobi
@@ -355,9 +366,7 @@ void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
   }
   for (size_t l = 0; l + 1 < matrix_.size(); ++l) {
     invert_diagonal(matrix_[l], inverse_diagonal_[l]);
-    BlockMatrix& m = matrix_[l];
-    m.block_f.resize(m.block.size());
-    for (size_t k = 0; k < m.block.size(); ++k) m.block_f[k] = m.block[k].cast<float>();
+    if (l > 0) single_precision(matrix_[l]);  // level 0's by copy_values
   }
   // the coarsest level, dense
   const BlockMatrix& last = matrix_.back();
