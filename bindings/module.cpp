@@ -380,6 +380,7 @@ PYBIND11_MODULE(_core, m) {
              d["self_collision_candidates"] = s.self_collision.candidates;
              d["self_collision_updates"] = s.self_collision.updates;
              d["self_collision_tests"] = s.self_collision.tests;
+             d["self_collision_near_pairs"] = s.self_collision.near_pairs;
              return d;
            })
       .def("quality", [](const World& w) {

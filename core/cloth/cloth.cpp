@@ -631,7 +631,7 @@ double Cloth::inverse_mass(int k, const std::vector<char>* held) const {
   return model_->pinned[k] || (held && (*held)[k]) ? 0.0 : 1.0 / model_->mass[k];
 }
 
-double Cloth::strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held) {
+double Cloth::strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held, Points* reaction) {
   const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
   const double limit = model_->material.strain_limit;
   const bool enforce = model_->material.compression == CompressionMode::kEnforce;
@@ -649,29 +649,33 @@ double Cloth::strain_sweep(double dt, const std::vector<int>& order, const std::
     const Vec3 change = (excess / (dt * (wi + wj) * length)) * d;
     v_.row(e.i) += (wi * change).transpose();
     v_.row(e.j) -= (wj * change).transpose();
+    if (reaction && wi == 0.0 && !model_->pinned[e.i]) reaction->row(e.i) += change.transpose();
+    if (reaction && wj == 0.0 && !model_->pinned[e.j]) reaction->row(e.j) -= change.transpose();
   }
   return worst;
 }
 
-void Cloth::limit_strain(double dt, bool global) { limit_strain(dt, global, nullptr); }
+void Cloth::limit_strain(double dt, bool global) { limit_strain(dt, global, nullptr, nullptr); }
 
-void Cloth::limit_strain(double dt, bool global, const std::vector<char>* held) {
+void Cloth::limit_strain(double dt, bool global, const std::vector<char>* held, Points* reaction) {
   require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
   if (model_->material.strain_limit <= 0.0 && model_->material.compression != CompressionMode::kEnforce) return;
   // Gauss-Seidel sweeps with the true masses, forward and backward in turn (momentum is
   // kept: every impulse is internal); usually a few are enough
   for (int sweep = 0; sweep < kStrainSweeps; ++sweep) {
-    if (strain_sweep(dt, sweep % 2 == 0 ? model_->forward_order : model_->backward_order, held) < kStrainTolerance) return;
+    if (strain_sweep(dt, sweep % 2 == 0 ? model_->forward_order : model_->backward_order, held, reaction) < kStrainTolerance) return;
   }
   // They converge slowly where a long chain of edges holds a load (a soft cloth hanging
   // from pins by its strain limit: a correction diffuses about one edge per sweep, and a
   // 12 x 12 cloth can need hundreds of sweeps). The rest is solved for all edges at once.
-  if (global) project_strain(dt, held);
+  if (global) project_strain(dt, held, reaction);
 }
 
-void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
+Points Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
   require(held.size() == model_->pinned.size(), "held: one flag per vertex");
-  limit_strain(dt, true, &held);
+  Points reaction = Points::Zero(vertex_count(), 3);
+  limit_strain(dt, true, &held, &reaction);
+  return reaction;
 }
 
 // Strain limiting for all edges at once: Newton iterations on the candidate lengths (the
@@ -681,7 +685,7 @@ void Cloth::limit_strain_holding(double dt, const std::vector<char>& held) {
 // and change v by W J^T mu / dt: along each edge, equal and opposite, mass-weighted, as in a
 // sweep. An edge is active while it violates its bound, and stays active (held at the
 // bound) until its impulse would have to push the wrong way (apart for a stretched edge).
-void Cloth::project_strain(double dt, const std::vector<char>* held) {
+void Cloth::project_strain(double dt, const std::vector<char>* held, Points* reaction) {
   const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
   const double limit = model_->material.strain_limit;
   const bool enforce = model_->material.compression == CompressionMode::kEnforce;
@@ -708,7 +712,7 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
     Eigen::VectorXd mu;
     std::vector<int> active;
     std::vector<Vec3> direction;
-    Points move;
+    Points move, pushed;
     for (int attempt = 0; attempt < kActiveSetPasses; ++attempt) {
       active.clear();
       for (int q = 0; q < count; ++q) {
@@ -765,6 +769,14 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
         move.row(e.i) -= (inverse_mass(e.i, held) * mu[a] * direction[a]).transpose();
         move.row(e.j) += (inverse_mass(e.j, held) * mu[a] * direction[a]).transpose();
       }
+      if (reaction) {  // the held ends' share, as an impulse x dt
+        pushed.setZero(n, 3);
+        for (int a = 0; a < m; ++a) {
+          const cloth_detail::Edge& e = edges[active[a]];
+          if (inverse_mass(e.i, held) == 0.0 && !model_->pinned[e.i]) pushed.row(e.i) -= (mu[a] * direction[a]).transpose();
+          if (inverse_mass(e.j, held) == 0.0 && !model_->pinned[e.j]) pushed.row(e.j) += (mu[a] * direction[a]).transpose();
+        }
+      }
       const bool dropped = changed;
       for (int q = 0; q < count && !dropped; ++q) {
         if (target[q] >= 0.0 || length[q] <= 0.0) continue;
@@ -792,6 +804,7 @@ void Cloth::project_strain(double dt, const std::vector<char>* held) {
       scale *= 0.5;
     }
     for (int k = 0; k < n; ++k) v_.row(k) += (scale * move.row(k)) / dt;
+    if (reaction) *reaction += (scale / dt) * pushed;
   }
 }
 

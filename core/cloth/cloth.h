@@ -54,8 +54,10 @@ class Cloth {
   // constraints: at most one per free vertex (pinned ones are skipped), or null
   void update_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints = nullptr);
   void limit_strain(double dt, bool global = true);
-  // the same with the vertices marked in `held` (n) held still as if pinned, for this call
-  void limit_strain_holding(double dt, const std::vector<char>& held);
+  // the same with the vertices marked in `held` (n) held still as if pinned, for this call;
+  // returns the impulses (n x 3, N s) the held vertices would have taken (their edges' pushes
+  // against them, which the held ones absorb: what momentum the call did not keep)
+  Points limit_strain_holding(double dt, const std::vector<char>& held);
   void update_positions(double dt);
 
   // the largest stable explicit substep (speed-of-sound limit) for the current material (s)
@@ -100,11 +102,12 @@ class Cloth {
   void explicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
   void implicit_velocities(double dt, const Vec3& gravity, std::vector<ClothContactConstraint>* constraints);
   // the strain limiter, with the vertices marked in `held` (n, or null) held still besides
-  // the pinned ones; a held or pinned vertex's inverse mass is 0
-  void limit_strain(double dt, bool global, const std::vector<char>* held);
+  // the pinned ones; a held or pinned vertex's inverse mass is 0. With `reaction` (n x 3),
+  // the impulses each edge would have given its held (not pinned) end are summed there
+  void limit_strain(double dt, bool global, const std::vector<char>* held, Points* reaction);
   double inverse_mass(int k, const std::vector<char>* held) const;
-  double strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held);
-  void project_strain(double dt, const std::vector<char>* held);
+  double strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held, Points* reaction);
+  void project_strain(double dt, const std::vector<char>* held, Points* reaction);
   // the sum of the squared distances by which the edges are past their bounds at candidate
   // positions p (project_strain's line search)
   double bound_violation(const Points& p, const std::vector<char>* held) const;

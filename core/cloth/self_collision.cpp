@@ -26,6 +26,9 @@ constexpr size_t kMovedFraction = 8;       // all pairs are found again when mor
                                             // leave their boxes at once, the grids built again when 1 / 8
                                             // of them have since the last full search
 constexpr size_t kChunk = 512;              // pairs per parallel task (fixed: same result at any thread count)
+constexpr double kFlat = 0.1;               // a pivot's triangles are flat when their normals stay within
+                                            // acos(0.1) = 84 degrees of one direction (any angle under 90
+                                            // would do; the rest is room for round-off)
 
 Vec3 row(const Points& p, int k) { return p.row(k).transpose(); }
 
@@ -447,6 +450,7 @@ SelfCollision::SelfCollision(const Triangles& triangles, int vertex_count)
                triangle_first_, vertex_triangles_);
   vertex_items([&](int e, int k) { return edges_[e][k]; }, static_cast<int>(edges_.size()), 2, vertex_count_,
                edge_first_, vertex_edges_);
+  build_near();
 }
 
 SelfCollision::~SelfCollision() = default;
@@ -554,6 +558,197 @@ constexpr double kUnmeasured = std::numeric_limits<double>::quiet_NaN();
 
 }  // namespace
 
+// ---- near pairs (see the top of self_collision.h)
+
+int SelfCollision::edge_index(int a, int b) const {
+  for (int i = edge_first_[a]; i < edge_first_[a + 1]; ++i) {
+    const int e = vertex_edges_[i];
+    if (edges_[e][0] == b || edges_[e][1] == b) return e;
+  }
+  return -1;
+}
+
+int SelfCollision::point_pivot(int k, int t) const {
+  int pivot = -1;
+  for (int j = 0; j < 3; ++j) {
+    const int q = triangles_(t, j);
+    if (near_.pivot[q] && (pivot < 0 || q < pivot) && edge_index(k, q) >= 0) pivot = q;
+  }
+  return pivot;
+}
+
+int SelfCollision::edge_pivot(int e, int f) const {
+  int pivot = -1;
+  const Near& m = near_;
+  // a triangle on one edge whose third vertex is on the other
+  for (const auto& [on, other] : {std::pair<int, int>{e, f}, std::pair<int, int>{f, e}}) {
+    for (int i = m.edge_first[on]; i < m.edge_first[on + 1]; ++i) {
+      const int q = m.edge_opposite[i];
+      if ((q == edges_[other][0] || q == edges_[other][1]) && m.pivot[q] && (pivot < 0 || q < pivot)) pivot = q;
+    }
+  }
+  return pivot;
+}
+
+void SelfCollision::build_near() {
+  Near& m = near_;
+  const int n = vertex_count_, nt = static_cast<int>(triangles_.rows()), ne = static_cast<int>(edges_.size());
+  // each edge's triangles' third vertices
+  std::vector<std::array<int, 2>> opposite;  // (edge, vertex)
+  for (int t = 0; t < nt; ++t) {
+    for (int j = 0; j < 3; ++j) opposite.push_back({edge_index(triangles_(t, j), triangles_(t, (j + 1) % 3)), triangles_(t, (j + 2) % 3)});
+  }
+  std::sort(opposite.begin(), opposite.end());
+  m.edge_first.assign(ne + 1, 0);
+  m.edge_opposite.clear();
+  for (const auto& [e, q] : opposite) {
+    ++m.edge_first[e + 1];
+    m.edge_opposite.push_back(q);
+  }
+  for (int e = 0; e < ne; ++e) m.edge_first[e + 1] += m.edge_first[e];
+  // interior vertices: every edge of q on two triangles, and q's link (the edges across its
+  // triangles from it) one cycle through all of its neighbours
+  m.pivot.assign(n, 0);
+  std::vector<std::array<int, 2>> link;
+  std::vector<char> used;
+  for (int q = 0; q < n; ++q) {
+    link.clear();
+    for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) {
+      const int t = vertex_triangles_[i];
+      std::array<int, 2> across{};
+      int count = 0;
+      for (int j = 0; j < 3; ++j) {
+        if (triangles_(t, j) != q && count < 2) across[count++] = triangles_(t, j);
+      }
+      link.push_back(across);
+    }
+    bool closed = link.size() >= 3 && static_cast<int>(link.size()) == edge_first_[q + 1] - edge_first_[q];
+    for (int i = edge_first_[q]; closed && i < edge_first_[q + 1]; ++i) {
+      const int e = vertex_edges_[i];
+      closed = m.edge_first[e + 1] - m.edge_first[e] == 2;
+    }
+    if (!closed) continue;
+    used.assign(link.size(), 0);
+    used[0] = 1;
+    int at = link[0][1];
+    size_t walked = 1;
+    for (bool moved = true; moved && at != link[0][0];) {
+      moved = false;
+      for (size_t i = 0; i < link.size() && !moved; ++i) {
+        if (used[i] || (link[i][0] != at && link[i][1] != at)) continue;
+        used[i] = 1;
+        at = link[i][0] == at ? link[i][1] : link[i][0];
+        ++walked;
+        moved = true;
+      }
+    }
+    m.pivot[q] = at == link[0][0] && walked == link.size();
+  }
+  // each pivot's pairs
+  for (int kind = 0; kind < 2; ++kind) {
+    m.first[kind].assign(n + 1, 0);
+    m.items[kind].clear();
+  }
+  for (int q = 0; q < n; ++q) {
+    if (m.pivot[q]) {
+      for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) {
+        const int t = vertex_triangles_[i];
+        // points next to q against q's triangle t
+        for (int j = edge_first_[q]; j < edge_first_[q + 1]; ++j) {
+          const auto& e = edges_[vertex_edges_[j]];
+          const int k = e[0] == q ? e[1] : e[0];
+          if (!on_triangle(triangles_, t, k) && point_pivot(k, t) == q) m.items[0].push_back({k, t});
+        }
+        // the edge across t from q against q's edges outside t
+        int a = -1, b = -1;
+        for (int j = 0; j < 3; ++j) {
+          if (triangles_(t, j) == q) {
+            a = triangles_(t, (j + 1) % 3);
+            b = triangles_(t, (j + 2) % 3);
+          }
+        }
+        const int across = edge_index(a, b);
+        for (int j = edge_first_[q]; j < edge_first_[q + 1]; ++j) {
+          const int f = vertex_edges_[j];
+          if (on_triangle(triangles_, t, edges_[f][0]) && on_triangle(triangles_, t, edges_[f][1])) continue;
+          if (edge_pivot(across, f) == q) m.items[1].push_back({std::min(across, f), std::max(across, f)});
+        }
+      }
+    }
+    for (int kind = 0; kind < 2; ++kind) {
+      auto& items = m.items[kind];
+      // a pair found twice around q (q's triangles share points and edges) counts once
+      std::sort(items.begin() + m.first[kind][q], items.end());
+      items.erase(std::unique(items.begin() + m.first[kind][q], items.end()), items.end());
+      m.first[kind][q + 1] = static_cast<int>(items.size());
+    }
+  }
+  m.active.assign(n, 0);
+}
+
+void SelfCollision::forget_near(const std::vector<char>* moving) {
+  for (auto& pairs : near_.pairs) {
+    for (Pair& p : pairs) {
+      if (moving && !((*moving)[p.vertex[0]] || (*moving)[p.vertex[1]] || (*moving)[p.vertex[2]] || (*moving)[p.vertex[3]])) continue;
+      p.distance = std::numeric_limits<double>::quiet_NaN();
+      p.clear = -1;
+      p.exact = false;
+    }
+  }
+}
+
+void SelfCollision::activate_near(const Points& x, const Points& v, double dt, bool new_step,
+                                  SelfCollisionStatistics& stats) {
+  Near& m = near_;
+  if (new_step) {
+    for (auto& pairs : m.pairs) pairs.clear();
+    std::fill(m.active.begin(), m.active.end(), 0);
+  }
+  // each triangle's normal over the step, n(s) = (e1 + s d1) x (e2 + s d2), by its Bernstein
+  // coefficients on [0, 1]: n(s) is a convex combination of them, so n(s) . a is at least
+  // their least and |n(s)| at most their largest
+  const int nt = static_cast<int>(triangles_.rows());
+  m.normal.resize(nt);
+  tbb::parallel_for(0, nt, [&](int t) {
+    const Vec3 a = row(x, triangles_(t, 0));
+    const Vec3 e1 = row(x, triangles_(t, 1)) - a, e2 = row(x, triangles_(t, 2)) - a;
+    const Vec3 da = dt * row(v, triangles_(t, 0));
+    const Vec3 d1 = dt * row(v, triangles_(t, 1)) - da, d2 = dt * row(v, triangles_(t, 2)) - da;
+    const Vec3 c0 = e1.cross(e2), c1 = e1.cross(d2) + d1.cross(e2), c2 = d1.cross(d2);
+    m.normal[t] = {c0, c0 + 0.5 * c1, c0 + c1 + c2};
+  });
+  const auto flat = [&](int q) {
+    Vec3 axis = Vec3::Zero();
+    for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) axis += m.normal[vertex_triangles_[i]][0];
+    if (!(axis.squaredNorm() > 0.0)) return false;
+    axis.normalize();
+    for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) {
+      const auto& b = m.normal[vertex_triangles_[i]];
+      const double least = std::min({b[0].dot(axis), b[1].dot(axis), b[2].dot(axis)});
+      const double largest = std::sqrt(std::max({b[0].squaredNorm(), b[1].squaredNorm(), b[2].squaredNorm()}));
+      if (!(least >= kFlat * largest)) return false;
+    }
+    return true;
+  };
+  long long added = 0;
+  for (int q = 0; q < vertex_count_; ++q) {
+    if (!m.pivot[q] || m.active[q] || flat(q)) continue;
+    m.active[q] = 1;
+    for (int i = m.first[0][q]; i < m.first[0][q + 1]; ++i) {
+      const auto [k, t] = m.items[0][i];
+      m.pairs[0].push_back({{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false});
+    }
+    for (int i = m.first[1][q]; i < m.first[1][q + 1]; ++i) {
+      const auto [e, f] = m.items[1][i];
+      m.pairs[1].push_back({{edges_[e][0], edges_[e][1], edges_[f][0], edges_[f][1]}, kUnmeasured, -1, false});
+    }
+    added += m.first[0][q + 1] - m.first[0][q] + m.first[1][q + 1] - m.first[1][q];
+  }
+  if (added > 0) start_.measured = false;
+  stats.near_pairs += added;
+}
+
+
 // a vertex's box (in the frame): its start and end of the step, grown by the margin
 Box3 SelfCollision::vertex_box(const Points& x, const Points& v, double dt, int k) const {
   const Candidates& c = candidates_;
@@ -586,18 +781,21 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
   parallel_collect(n, c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = static_cast<int>(i);
     c.triangle_grid->query(c.point_boxes[k], [&](int t) {
-      if (!on_triangle(triangles_, t, k)) out.push_back({{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false});
+      if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) {
+        out.push_back({{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false});
+      }
     });
   });
   // edges against edges, each pair once
   std::vector<std::pair<int, int>> edge_pairs;
-  c.edge_grid->self_pairs(edge_pairs, [&](int e, int f) { return !share_vertex(edges_[e], edges_[f]); });
+  c.edge_grid->self_pairs(edge_pairs, [&](int e, int f) { return !share_vertex(edges_[e], edges_[f]) && edge_pivot(e, f) < 0; });
   c.pairs[1].resize(edge_pairs.size());
   for (size_t p = 0; p < edge_pairs.size(); ++p) {
     const auto& [e, f] = edge_pairs[p];
     c.pairs[1][p] = {{edges_[e][0], edges_[e][1], edges_[f][0], edges_[f][1]}, kUnmeasured, -1, false};
   }
   start_.proximity.clear();
+  forget_near(nullptr);
   start_.measured = false;
   ++stats.searches;
   stats.candidates += static_cast<long long>(c.pairs[0].size() + c.pairs[1].size());
@@ -647,6 +845,7 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
   auto& proximity = start_.proximity;
   proximity.erase(std::remove_if(proximity.begin(), proximity.end(), [&](const Contact& p) { return moves(p.vertex); }),
                   proximity.end());
+  forget_near(&moving);
   // every item whose box meets `box`: from the full search's grid (less its stale items) and
   // a grid of the stale items
   const auto stale_grid = [](const std::vector<int>& items, const std::vector<Box3>& boxes) {
@@ -671,20 +870,20 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = moved[i];
     near(*c.triangle_grid, c.stale_triangle, stale_triangles, c.stale_triangles, c.point_boxes[k], [&](int t) {
-      if (!on_triangle(triangles_, t, k)) out.push_back(point_triangle(k, t));
+      if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle(k, t));
     });
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int t = triangles[i];
     near(*c.point_grid, c.stale_point, stale_points, c.stale_points, c.triangle_boxes[t], [&](int k) {
-      if (!moving[k] && !on_triangle(triangles_, t, k)) out.push_back(point_triangle(k, t));
+      if (!moving[k] && !on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle(k, t));
     });
   });
   // touched edges against every edge (a pair of two touched edges once)
   parallel_collect(edges.size(), c.pairs[1], [&](size_t i, std::vector<Pair>& out) {
     const int e = edges[i];
     near(*c.edge_grid, c.stale_edge, stale_edges, c.stale_edges, c.edge_boxes[e], [&](int f) {
-      if ((touched_edge[f] && f <= e) || share_vertex(edges_[e], edges_[f])) return;
+      if ((touched_edge[f] && f <= e) || share_vertex(edges_[e], edges_[f]) || edge_pivot(e, f) >= 0) return;
       const int a = std::min(e, f), b = std::max(e, f);
       out.push_back({{edges_[a][0], edges_[a][1], edges_[b][0], edges_[b][1]}, kUnmeasured, -1, false});
     });
@@ -713,6 +912,7 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
     }
   }
   update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats);
+  activate_near(x, v, dt, new_step, stats);
   if (new_step || s.h != h) {
     // every pair measured again (in the same pass over the pairs that measures them)
     s.x = x;
@@ -729,8 +929,9 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
 // is at least h (a lower bound, for the continuous test to refine if it must), the exact
 // distance otherwise; the pairs closer than h join the repulsion contacts
 void SelfCollision::measure(const Points& x, double h, bool all) {
-  for (int kind = 0; kind < 2; ++kind) {
-    auto& pairs = candidates_.pairs[kind];
+  for (int list = 0; list < 4; ++list) {
+    const int kind = list % 2;
+    auto& pairs = list < 2 ? candidates_.pairs[kind] : near_.pairs[kind];
     const int split = kind == 0 ? 1 : 2;
     parallel_collect(pairs.size(), start_.proximity, [&](size_t n, std::vector<Contact>& found) {
       Pair& p = pairs[n];
@@ -871,8 +1072,9 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
       return;  // the earliest contact of the pair
     }
   };
-  for (int kind = 0; kind < 2; ++kind) {
-    auto& pairs = candidates_.pairs[kind];
+  for (int list = 0; list < 4; ++list) {
+    const int kind = list % 2;
+    auto& pairs = list < 2 ? candidates_.pairs[kind] : near_.pairs[kind];
     parallel_collect(pairs.size(), out, [&](size_t n, std::vector<Contact>& found) { test(kind, pairs[n], found); });
   }
   // earliest first (the order does not depend on how the pairs were found)
@@ -922,11 +1124,64 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
   return false;
 }
 
+namespace {
+
+// A zone's vertices given one rigid motion, that of the zone's momentum and angular momentum
+// about its centre of mass, with `impulse` (n x 3, N s, if any) added to its vertices' own; a
+// zone holding a pinned vertex stays still
+void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
+                  const Points* impulse) {
+  double mass = 0.0;
+  Vec3 center = Vec3::Zero(), momentum = Vec3::Zero();
+  for (int i : zone) {
+    if (inverse_mass[i] <= 0.0) {
+      for (int k : zone) v.row(k).setZero();
+      return;
+    }
+    const double m = 1.0 / inverse_mass[i];
+    mass += m;
+    center += m * row(x, i);
+    momentum += m * row(v, i);
+    if (impulse) momentum += row(*impulse, i);
+  }
+  center /= mass;
+  const Vec3 velocity = momentum / mass;
+  Vec3 angular = Vec3::Zero();
+  Mat3 inertia = Mat3::Zero();
+  for (int i : zone) {
+    const double m = 1.0 / inverse_mass[i];
+    const Vec3 r = row(x, i) - center;
+    angular += m * r.cross(row(v, i) - velocity);
+    if (impulse) angular += r.cross(row(*impulse, i));
+    inertia += m * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+  }
+  // a zone on one line has no inertia about it: the pseudo-inverse leaves that spin out
+  const Vec3 omega = inertia.completeOrthogonalDecomposition().solve(angular);
+  for (int i : zone) v.row(i) = (velocity + omega.cross(row(x, i) - center)).transpose();
+}
+
+}  // namespace
+
+void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
+                               const Points& impulse) const {
+  std::vector<std::vector<int>> zones(vertex_count_);
+  for (int i = 0; i < vertex_count_; ++i) {
+    if (!in_zone_[i]) continue;
+    int root = i;
+    while (zone_parent_[root] != root) root = zone_parent_[root];
+    zones[root].push_back(i);
+  }
+  for (const std::vector<int>& zone : zones) {
+    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse);
+  }
+}
+
 void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                                  const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
   std::vector<Contact> contacts;
   // 3. rigid impact zones until nothing collides
-  std::vector<int> parent(vertex_count_);
+  std::vector<int>& parent = zone_parent_;
+  parent.resize(vertex_count_);
   std::iota(parent.begin(), parent.end(), 0);
   in_zone_.assign(vertex_count_, 0);
   std::vector<char>& in_zone = in_zone_;
@@ -966,36 +1221,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     for (const std::vector<int>& zone : zones) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
-      bool fixed = false;
-      double mass = 0.0;
-      Vec3 center = Vec3::Zero(), momentum = Vec3::Zero();
-      for (int i : zone) {
-        if (inverse_mass[i] <= 0.0) {
-          fixed = true;
-          break;
-        }
-        const double m = 1.0 / inverse_mass[i];
-        mass += m;
-        center += m * row(x, i);
-        momentum += m * row(v, i);
-      }
-      if (fixed) {
-        for (int i : zone) v.row(i).setZero();
-        continue;
-      }
-      center /= mass;
-      const Vec3 velocity = momentum / mass;
-      Vec3 angular = Vec3::Zero();
-      Mat3 inertia = Mat3::Zero();
-      for (int i : zone) {
-        const double m = 1.0 / inverse_mass[i];
-        const Vec3 r = row(x, i) - center;
-        angular += m * r.cross(row(v, i) - velocity);
-        inertia += m * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
-      }
-      // a zone on one line has no inertia about it: the pseudo-inverse leaves that spin out
-      const Vec3 omega = inertia.completeOrthogonalDecomposition().solve(angular);
-      for (int i : zone) v.row(i) = (velocity + omega.cross(row(x, i) - center)).transpose();
+      move_rigidly(zone, x, v, inverse_mass, nullptr);
     }
   }
   // the last resort: nothing moves, and a cloth free of crossings stays free of them

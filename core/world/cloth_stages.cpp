@@ -182,8 +182,11 @@ void World::step_cloths(double dt) {
         if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kFinalSlack)) break;
         if (round + 1 == kZoneRounds) break;
         {
+          // the zones take the pushes of the edges around them as rigid bodies, so that
+          // momentum is kept (held still, they would absorb them)
           ScopedTimer timer(profile_.cloth_strain);
-          cloth.limit_strain_holding(dt, self->zone_vertices());
+          const Points pushed = cloth.limit_strain_holding(dt, self->zone_vertices());
+          self->push_zones(cloth.positions(), cloth.velocities(), inverse_mass, pushed);
         }
         clear = collide_self(1);
       }
