@@ -704,12 +704,31 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
     for (auto& pairs : m.pairs) pairs.clear();
     std::fill(m.active.begin(), m.active.end(), 0);
   }
+  // what changed since the last call: at a new step everything; within a step (the same x)
+  // the vertices whose velocities the passes between changed, and so their triangles and the
+  // pivots those triangles belong to
+  const int nt = static_cast<int>(triangles_.rows());
+  const bool all = new_step || m.velocity.rows() != v.rows() || m.dt != dt;
+  m.triangle_changed.assign(nt, all);
+  m.check.assign(vertex_count_, all);
+  if (!all) {
+    for (int k = 0; k < vertex_count_; ++k) {
+      if (v.row(k) == m.velocity.row(k)) continue;
+      for (int i = triangle_first_[k]; i < triangle_first_[k + 1]; ++i) {
+        const int t = vertex_triangles_[i];
+        m.triangle_changed[t] = 1;
+        for (int j = 0; j < 3; ++j) m.check[triangles_(t, j)] = 1;
+      }
+    }
+  }
+  m.velocity = v;
+  m.dt = dt;
   // each triangle's normal over the step, n(s) = (e1 + s d1) x (e2 + s d2), by its Bernstein
   // coefficients on [0, 1]: n(s) is a convex combination of them, so n(s) . a is at least
   // their least and |n(s)| at most their largest
-  const int nt = static_cast<int>(triangles_.rows());
   m.normal.resize(nt);
   tbb::parallel_for(0, nt, [&](int t) {
+    if (!m.triangle_changed[t]) return;
     const Vec3 a = row(x, triangles_(t, 0));
     const Vec3 e1 = row(x, triangles_(t, 1)) - a, e2 = row(x, triangles_(t, 2)) - a;
     const Vec3 da = dt * row(v, triangles_(t, 0));
@@ -732,7 +751,7 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
   };
   long long added = 0;
   for (int q = 0; q < vertex_count_; ++q) {
-    if (!m.pivot[q] || m.active[q] || flat(q)) continue;
+    if (!m.pivot[q] || m.active[q] || !m.check[q] || flat(q)) continue;
     m.active[q] = 1;
     for (int i = m.first[0][q]; i < m.first[0][q + 1]; ++i) {
       const auto [k, t] = m.items[0][i];

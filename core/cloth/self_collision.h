@@ -188,7 +188,12 @@ class SelfCollision {
     std::vector<int> edge_first, edge_opposite;             // each edge's triangles' third vertices
     std::vector<char> active;                               // (n) the pivots whose pairs are candidates this step
     std::array<std::vector<Pair>, 2> pairs;                 // those candidates
-    std::vector<std::array<Vec3, 3>> normal;                // (triangles) scratch: Bernstein coefficients of n(s)
+    std::vector<std::array<Vec3, 3>> normal;                // (triangles) Bernstein coefficients of n(s)
+    // the velocities and dt the normals are of, and scratch: the triangles whose normals and
+    // the pivots whose flatness are looked at again
+    Points velocity;
+    double dt = 0.0;
+    std::vector<char> triangle_changed, check;
   };
   Candidates candidates_;
   Near near_;
