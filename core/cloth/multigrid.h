@@ -35,7 +35,8 @@ struct BlockMatrix {
   std::vector<int> diagonal;                          // (size) the entry of each row's diagonal block
   std::vector<Mat3, Eigen::aligned_allocator<Mat3>> block;  // (entries) values
   // (entries) the values in single precision, which the V-cycle and the conjugate
-  // gradients' products read (the latter when the solve's tolerance is 1e-5 or looser):
+  // gradients' products read (the latter when the solve's tolerance is 1e-5 or looser and
+  // the system has 1,000 blocks or more):
   // both are bound by memory traffic (the drape's first second at 257 x 257: solve 35.1 CPU s,
   // 46.7 with the product in double; at 129 x 129 over 3 s, 26.1 against 29.7), and a
   // preconditioner or a solve to 1e-3 needs no more digits (the rounding is 1e-7 relative)
