@@ -36,10 +36,10 @@ struct BlockMatrix {
   std::vector<Mat3, Eigen::aligned_allocator<Mat3>> block;  // (entries) values
   // (entries) the values in single precision, which the V-cycle and the conjugate
   // gradients' products read (the latter when the solve's tolerance is 1e-5 or looser and
-  // the system has 1,000 blocks or more):
-  // both are bound by memory traffic (the drape's first second at 257 x 257: solve 35.1 CPU s,
-  // 46.7 with the product in double; at 129 x 129 over 3 s, 26.1 against 29.7), and a
-  // preconditioner or a solve to 1e-3 needs no more digits (the rounding is 1e-7 relative)
+  // the system has 1,000 blocks or more, cloth.cpp): large systems are bound by memory
+  // traffic (the drape's first second at 257 x 257: solve 35.1 CPU s, 46.7 with the product
+  // in double), and a preconditioner or a solve to 1e-3 needs no more digits (the rounding
+  // is 1e-7 relative)
   std::vector<Eigen::Matrix3f, Eigen::aligned_allocator<Eigen::Matrix3f>> block_f;
   // (entries) where each block's values sit in the Eigen matrix it is copied from
   // (copy_values): its (0, 0) entry, and the distance between its three columns there
