@@ -769,19 +769,15 @@ void Cloth::project_strain(double dt, const std::vector<char>* held, Points* rea
       }
       // the position change these impulses make, and the edges it would push past a bound
       // (to first order): they join, and the set is solved again
+      // (and with `reaction`, the held ends' share of the impulses, x dt)
       move.setZero(n, 3);
+      if (reaction) pushed.setZero(n, 3);
       for (int a = 0; a < m; ++a) {
         const cloth_detail::Edge& e = edges[active[a]];
         move.row(e.i) -= (inverse_mass(e.i, held) * mu[a] * direction[a]).transpose();
         move.row(e.j) += (inverse_mass(e.j, held) * mu[a] * direction[a]).transpose();
-      }
-      if (reaction) {  // the held ends' share, as an impulse x dt
-        pushed.setZero(n, 3);
-        for (int a = 0; a < m; ++a) {
-          const cloth_detail::Edge& e = edges[active[a]];
-          if (inverse_mass(e.i, held) == 0.0 && !model_->pinned[e.i]) pushed.row(e.i) -= (mu[a] * direction[a]).transpose();
-          if (inverse_mass(e.j, held) == 0.0 && !model_->pinned[e.j]) pushed.row(e.j) += (mu[a] * direction[a]).transpose();
-        }
+        if (reaction && inverse_mass(e.i, held) == 0.0 && !model_->pinned[e.i]) pushed.row(e.i) -= (mu[a] * direction[a]).transpose();
+        if (reaction && inverse_mass(e.j, held) == 0.0 && !model_->pinned[e.j]) pushed.row(e.j) += (mu[a] * direction[a]).transpose();
       }
       const bool dropped = changed;
       for (int q = 0; q < count && !dropped; ++q) {

@@ -558,6 +558,19 @@ constexpr double kUnmeasured = std::numeric_limits<double>::quiet_NaN();
 
 }  // namespace
 
+SelfCollision::Pair SelfCollision::point_triangle_pair(int k, int t) const {
+  return {{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false};
+}
+
+SelfCollision::Pair SelfCollision::edge_pair(int e, int f) const {
+  const int a = std::min(e, f), b = std::max(e, f);
+  return {{edges_[a][0], edges_[a][1], edges_[b][0], edges_[b][1]}, kUnmeasured, -1, false};
+}
+
+std::vector<SelfCollision::Pair>& SelfCollision::pair_list(int list) {
+  return list < 2 ? candidates_.pairs[list] : near_.pairs[list - 2];
+}
+
 // ---- near pairs (see the top of self_collision.h)
 
 int SelfCollision::edge_index(int a, int b) const {
@@ -727,6 +740,7 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
   // coefficients on [0, 1]: n(s) is a convex combination of them, so n(s) . a is at least
   // their least and |n(s)| at most their largest
   m.normal.resize(nt);
+  m.largest.resize(nt);
   tbb::parallel_for(0, nt, [&](int t) {
     if (!m.triangle_changed[t]) return;
     const Vec3 a = row(x, triangles_(t, 0));
@@ -734,7 +748,8 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
     const Vec3 da = dt * row(v, triangles_(t, 0));
     const Vec3 d1 = dt * row(v, triangles_(t, 1)) - da, d2 = dt * row(v, triangles_(t, 2)) - da;
     const Vec3 c0 = e1.cross(e2), c1 = e1.cross(d2) + d1.cross(e2), c2 = d1.cross(d2);
-    m.normal[t] = {c0, c0 + 0.5 * c1, c0 + c1 + c2};
+    const auto& b = m.normal[t] = {c0, c0 + 0.5 * c1, c0 + c1 + c2};
+    m.largest[t] = std::sqrt(std::max({b[0].squaredNorm(), b[1].squaredNorm(), b[2].squaredNorm()}));
   });
   const auto flat = [&](int q) {
     Vec3 axis = Vec3::Zero();
@@ -742,10 +757,10 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
     if (!(axis.squaredNorm() > 0.0)) return false;
     axis.normalize();
     for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) {
-      const auto& b = m.normal[vertex_triangles_[i]];
+      const int t = vertex_triangles_[i];
+      const auto& b = m.normal[t];
       const double least = std::min({b[0].dot(axis), b[1].dot(axis), b[2].dot(axis)});
-      const double largest = std::sqrt(std::max({b[0].squaredNorm(), b[1].squaredNorm(), b[2].squaredNorm()}));
-      if (!(least >= kFlat * largest)) return false;
+      if (!(least >= kFlat * m.largest[t])) return false;
     }
     return true;
   };
@@ -755,11 +770,11 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
     m.active[q] = 1;
     for (int i = m.first[0][q]; i < m.first[0][q + 1]; ++i) {
       const auto [k, t] = m.items[0][i];
-      m.pairs[0].push_back({{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false});
+      m.pairs[0].push_back(point_triangle_pair(k, t));
     }
     for (int i = m.first[1][q]; i < m.first[1][q + 1]; ++i) {
       const auto [e, f] = m.items[1][i];
-      m.pairs[1].push_back({{edges_[e][0], edges_[e][1], edges_[f][0], edges_[f][1]}, kUnmeasured, -1, false});
+      m.pairs[1].push_back(edge_pair(e, f));
     }
     added += m.first[0][q + 1] - m.first[0][q] + m.first[1][q + 1] - m.first[1][q];
   }
@@ -801,7 +816,7 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
     const int k = static_cast<int>(i);
     c.triangle_grid->query(c.point_boxes[k], [&](int t) {
       if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) {
-        out.push_back({{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false});
+        out.push_back(point_triangle_pair(k, t));
       }
     });
   });
@@ -811,7 +826,7 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
   c.pairs[1].resize(edge_pairs.size());
   for (size_t p = 0; p < edge_pairs.size(); ++p) {
     const auto& [e, f] = edge_pairs[p];
-    c.pairs[1][p] = {{edges_[e][0], edges_[e][1], edges_[f][0], edges_[f][1]}, kUnmeasured, -1, false};
+    c.pairs[1][p] = edge_pair(e, f);
   }
   start_.proximity.clear();
   forget_near(nullptr);
@@ -883,19 +898,16 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
     stale_grid.query(box, [&](int i) { visit(stale_items[i]); });
   };
   // moved points against every triangle; touched triangles against the points that did not move
-  const auto point_triangle = [&](int k, int t) {
-    return Pair{{k, triangles_(t, 0), triangles_(t, 1), triangles_(t, 2)}, kUnmeasured, -1, false};
-  };
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = moved[i];
     near(*c.triangle_grid, c.stale_triangle, stale_triangles, c.stale_triangles, c.point_boxes[k], [&](int t) {
-      if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle(k, t));
+      if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle_pair(k, t));
     });
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int t = triangles[i];
     near(*c.point_grid, c.stale_point, stale_points, c.stale_points, c.triangle_boxes[t], [&](int k) {
-      if (!moving[k] && !on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle(k, t));
+      if (!moving[k] && !on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle_pair(k, t));
     });
   });
   // touched edges against every edge (a pair of two touched edges once)
@@ -903,8 +915,7 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
     const int e = edges[i];
     near(*c.edge_grid, c.stale_edge, stale_edges, c.stale_edges, c.edge_boxes[e], [&](int f) {
       if ((touched_edge[f] && f <= e) || share_vertex(edges_[e], edges_[f]) || edge_pivot(e, f) >= 0) return;
-      const int a = std::min(e, f), b = std::max(e, f);
-      out.push_back({{edges_[a][0], edges_[a][1], edges_[b][0], edges_[b][1]}, kUnmeasured, -1, false});
+      out.push_back(edge_pair(e, f));
     });
   });
   start_.measured = false;
@@ -950,7 +961,7 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
 void SelfCollision::measure(const Points& x, double h, bool all) {
   for (int list = 0; list < 4; ++list) {
     const int kind = list % 2;
-    auto& pairs = list < 2 ? candidates_.pairs[kind] : near_.pairs[kind];
+    std::vector<Pair>& pairs = pair_list(list);
     const int split = kind == 0 ? 1 : 2;
     parallel_collect(pairs.size(), start_.proximity, [&](size_t n, std::vector<Contact>& found) {
       Pair& p = pairs[n];
@@ -1093,7 +1104,7 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
   };
   for (int list = 0; list < 4; ++list) {
     const int kind = list % 2;
-    auto& pairs = list < 2 ? candidates_.pairs[kind] : near_.pairs[kind];
+    std::vector<Pair>& pairs = pair_list(list);
     parallel_collect(pairs.size(), out, [&](size_t n, std::vector<Contact>& found) { test(kind, pairs[n], found); });
   }
   // earliest first (the order does not depend on how the pairs were found)
@@ -1181,8 +1192,7 @@ void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
 
 }  // namespace
 
-void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
-                               const Points& impulse) const {
+std::vector<std::vector<int>> SelfCollision::zone_members() const {
   std::vector<std::vector<int>> zones(vertex_count_);
   for (int i = 0; i < vertex_count_; ++i) {
     if (!in_zone_[i]) continue;
@@ -1190,7 +1200,12 @@ void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd
     while (zone_parent_[root] != root) root = zone_parent_[root];
     zones[root].push_back(i);
   }
-  for (const std::vector<int>& zone : zones) {
+  return zones;
+}
+
+void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
+                               const Points& impulse) const {
+  for (const std::vector<int>& zone : zone_members()) {
     if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse);
   }
 }
@@ -1233,11 +1248,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
       }
     }
     // each zone's rigid motion: momentum and angular momentum about its centre of mass kept
-    std::vector<std::vector<int>> zones(vertex_count_);
-    for (int i = 0; i < vertex_count_; ++i) {
-      if (in_zone[i]) zones[find(i)].push_back(i);
-    }
-    for (const std::vector<int>& zone : zones) {
+    for (const std::vector<int>& zone : zone_members()) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
       move_rigidly(zone, x, v, inverse_mass, nullptr);

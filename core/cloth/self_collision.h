@@ -189,6 +189,7 @@ class SelfCollision {
     std::vector<char> active;                               // (n) the pivots whose pairs are candidates this step
     std::array<std::vector<Pair>, 2> pairs;                 // those candidates
     std::vector<std::array<Vec3, 3>> normal;                // (triangles) Bernstein coefficients of n(s)
+    std::vector<double> largest;                            // (triangles) the largest of their norms
     // the velocities and dt the normals are of, and scratch: the triangles whose normals and
     // the pivots whose flatness are looked at again
     Points velocity;
@@ -207,6 +208,13 @@ class SelfCollision {
   // each vertex's triangles and edges: those of vertex k at [first[k], first[k + 1])
   std::vector<int> triangle_first_, vertex_triangles_, edge_first_, vertex_edges_;
 
+  Pair point_triangle_pair(int k, int t) const;  // point k against triangle t, not yet measured
+  Pair edge_pair(int e, int f) const;             // edges e and f (the lower index first), not yet measured
+  // the candidate lists: 0, 1 the broad phase's (points against triangles, edges against
+  // edges), 2, 3 this step's near pairs of the same kinds
+  std::vector<Pair>& pair_list(int list);
+  // the last impact zones' vertices, ascending, at each zone's root (others empty)
+  std::vector<std::vector<int>> zone_members() const;
   void build_near();
   int edge_index(int a, int b) const;  // the edge joining vertices a and b, or -1
   int point_pivot(int k, int t) const;  // the pivot of point k and triangle t (not on it) if near, else -1
