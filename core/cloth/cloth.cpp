@@ -201,12 +201,12 @@ Vec3 block_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd
   return q;
 }
 
-// (A x) at block row i from A's single-precision values and x in four floats a block (the
-// conjugate gradients' products: bound by memory traffic, see BlockMatrix::block_f)
-Vec3 single_row_product(const cloth_detail::BlockMatrix& a, const Eigen::Matrix4Xf& x, int i) {
-  cloth_detail::Vec4f q = cloth_detail::Vec4f::Zero();
-  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q += cloth_detail::times_block(a.block_f[k], x.col(a.column[k]));
-  return q.head<3>().cast<double>();
+// (A x) at block row i from A's single-precision values, summed in double (the conjugate
+// gradients' products: bound by memory traffic, see BlockMatrix::block_f)
+Vec3 single_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& x, int i) {
+  Vec3 q = Vec3::Zero();
+  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block_f[k].cast<double>() * x.segment<3>(3 * a.column[k]);
+  return q;
 }
 
 // Constrained blocks of the implicit system: block `block`'s component along the unit
@@ -309,8 +309,7 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
   // single precision's rounding (1e-7 of each product) would show in a tighter solve, and a
   // small system is in cache, where converting the values costs more than reading them
   const bool single = tolerance >= kSinglePrecisionTolerance && a.size >= kSinglePrecisionBlocks;
-  Eigen::Matrix4Xf packed;  // (single) the search direction in four floats a block
-  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return single ? single_row_product(a, packed, i) : block_row_product(a, x, i); };
+  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return single ? single_row_product(a, x, i) : block_row_product(a, x, i); };
   apply_filter(filter, r);
   Eigen::VectorXd filtered_b = b;
   apply_filter(filter, filtered_b);
@@ -322,10 +321,6 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
   double rs = r.dot(direction);
   for (int iteration = 0; iteration < kMaxSolverIterations; ++iteration) {
     // q = A d and d . q in one pass over the blocks (d is filtered, so d . S q = d . q)
-    if (single) {
-      packed.resize(4, a.size);
-      for (int i = 0; i < a.size; ++i) packed.col(i) << direction.segment<3>(3 * i).cast<float>(), 0.0f;
-    }
     double dq = 0.0;
     for (int i = 0; i < a.size; ++i) {
       const Vec3 q = multiply(direction, i);

@@ -195,6 +195,15 @@ void invert_diagonal(const BlockMatrix& m, std::vector<Block, Eigen::aligned_all
   inverse.back().setZero();
 }
 
+// The V-cycle's vectors hold each block's three values in four floats, the fourth zero, so
+// that a 3x3 block times a vector is three 4-wide multiply-adds: b x = b_0 x_0 + b_1 x_1 +
+// b_2 x_2 over b's columns, each read as four floats (the fourth is the next column's first
+// value, or the next block's, or the padding after the last: its lane is discarded)
+using Vec4f = Eigen::Vector4f;
+inline Vec4f times_block(const Eigen::Matrix3f& b, const Vec4f& x) {
+  const float* c = b.data();
+  return Eigen::Map<const Vec4f>(c) * x[0] + Eigen::Map<const Vec4f>(c + 3) * x[1] + Eigen::Map<const Vec4f>(c + 6) * x[2];
+}
 inline Vec4f lanes3(Vec4f v) {
   v[3] = 0.0f;
   return v;

@@ -34,8 +34,7 @@ struct BlockMatrix {
   std::vector<int> column;                            // (entries) block column, ascending per row
   std::vector<int> diagonal;                          // (size) the entry of each row's diagonal block
   std::vector<Mat3, Eigen::aligned_allocator<Mat3>> block;  // (entries) values
-  // (entries + 1: a zero block of padding, see times_block) the values in single precision,
-  // which the V-cycle and the conjugate
+  // (entries) the values in single precision, which the V-cycle and the conjugate
   // gradients' products read (the latter when the solve's tolerance is 1e-5 or looser and
   // the system has 1,000 blocks or more, cloth.cpp): large systems are bound by memory
   // traffic (the drape's first second at 257 x 257: solve 35.1 CPU s, 46.7 with the product
@@ -46,17 +45,6 @@ struct BlockMatrix {
   // (copy_values): its (0, 0) entry, and the distance between its three columns there
   std::vector<int> source, stride;
 };
-
-// The V-cycle's vectors (and the conjugate gradients' single-precision products) hold each
-// block's three values in four floats, so that a 3x3 block times a vector is three 4-wide
-// multiply-adds: b x = b_0 x_0 + b_1 x_1 + b_2 x_2 over b's columns, each read as four floats
-// (the fourth is the next column's first value, or the next block's, or the padding after the
-// last, BlockMatrix::block_f: that lane of the result is to be discarded)
-using Vec4f = Eigen::Vector4f;
-inline Vec4f times_block(const Eigen::Matrix3f& b, const Vec4f& x) {
-  const float* c = b.data();
-  return Eigen::Map<const Vec4f>(c) * x[0] + Eigen::Map<const Vec4f>(c + 3) * x[1] + Eigen::Map<const Vec4f>(c + 6) * x[2];
-}
 
 // The block matrix of an Eigen matrix's pattern (full symmetric storage, dense 3x3 blocks),
 // values zero, with the positions copy_values reads
