@@ -53,14 +53,10 @@
 //    exactly), the residual restricted by P^T, the coarse correction, then a backward sweep:
 //        x = S_fwd(b);  x += P V_(l+1)(P^T (b - A x));  x = S_bwd(b, x).
 //    The backward sweep is the forward one's adjoint, so the cycle is a symmetric positive
-//    definite operator: a valid CG preconditioner.
-//  * The whole cycle runs in single precision (blocks, inverses and vectors; only the
-//    coarsest dense solve in double): its rounding (1e-7 relative) is far below what a
-//    preconditioner may err, and each block's product is then three 4-wide multiply-adds
-//    (times_block) instead of nine converted scalar ones. On the drape at 33 x 33 the solve
-//    took 0.81 CPU s instead of 1.06 (summed in double, blocks in single precision), with
-//    the same iteration counts in every multigrid test. Everything runs in a fixed order on
-//    one thread, so the result has the same bits at any thread count.
+//    definite operator: a valid CG preconditioner. The sweeps read the off-diagonal blocks
+//    in single precision (the products are summed in double): the cycle is bound by memory
+//    traffic, and its rounding (1e-7 relative) is far below what a preconditioner may err. Everything runs in a fixed order on one
+//    thread, so the result has the same bits at any thread count.
 #include "cloth/multigrid.h"
 
 #include <algorithm>
@@ -187,26 +183,9 @@ int entry(const BlockMatrix& m, int i, int j) {
 }
 
 // inverses of the diagonal blocks (a zero block, of a vertex with no mass, stays zero)
-// (in the precision of Block; + one zero block of padding, see single_precision)
-template <typename Block>
-void invert_diagonal(const BlockMatrix& m, std::vector<Block, Eigen::aligned_allocator<Block>>& inverse) {
-  inverse.resize(m.size + 1);
-  for (int i = 0; i < m.size; ++i) inverse[i] = m.block[m.diagonal[i]].inverse().template cast<typename Block::Scalar>();
-  inverse.back().setZero();
-}
-
-// The V-cycle's vectors hold each block's three values in four floats, the fourth zero, so
-// that a 3x3 block times a vector is three 4-wide multiply-adds: b x = b_0 x_0 + b_1 x_1 +
-// b_2 x_2 over b's columns, each read as four floats (the fourth is the next column's first
-// value, or the next block's, or the padding after the last: its lane is discarded)
-using Vec4f = Eigen::Vector4f;
-inline Vec4f times_block(const Eigen::Matrix3f& b, const Vec4f& x) {
-  const float* c = b.data();
-  return Eigen::Map<const Vec4f>(c) * x[0] + Eigen::Map<const Vec4f>(c + 3) * x[1] + Eigen::Map<const Vec4f>(c + 6) * x[2];
-}
-inline Vec4f lanes3(Vec4f v) {
-  v[3] = 0.0f;
-  return v;
+void invert_diagonal(const BlockMatrix& m, std::vector<Mat3, Eigen::aligned_allocator<Mat3>>& inverse) {
+  inverse.resize(m.size);
+  for (int i = 0; i < m.size; ++i) inverse[i] = m.block[m.diagonal[i]].inverse();
 }
 
 }  // namespace
@@ -238,9 +217,8 @@ namespace {
 
 // m.block_f from m.block
 void single_precision(BlockMatrix& m) {
-  m.block_f.resize(m.block.size() + 1);  // + 1: times_block reads one float past the last
+  m.block_f.resize(m.block.size());
   for (size_t k = 0; k < m.block.size(); ++k) m.block_f[k] = m.block[k].cast<float>();
-  m.block_f.back().setZero();
 }
 
 }  // namespace
@@ -270,7 +248,7 @@ void BlockJacobi::update(const Eigen::SparseMatrix<double>& a) {
 
 void BlockJacobi::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
   z.resize(r.size());
-  for (int k = 0; k < matrix_.size; ++k) at(z, k) = inverse_[k] * at(r, k);
+  for (size_t k = 0; k < inverse_.size(); ++k) at(z, static_cast<int>(k)) = inverse_[k] * at(r, static_cast<int>(k));
 }
 
 // ---- multigrid: the hierarchy (once per cloth)
@@ -365,11 +343,10 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
   solution_.resize(matrix_.size());
   residual_.resize(matrix_.size());
   for (size_t l = 0; l < matrix_.size(); ++l) {
-    rhs_[l].setZero(4, matrix_[l].size);
-    solution_[l].setZero(4, matrix_[l].size);
-    residual_[l].setZero(4, matrix_[l].size);
+    rhs_[l].setZero(3 * matrix_[l].size);
+    solution_[l].setZero(3 * matrix_[l].size);
+    residual_[l].setZero(3 * matrix_[l].size);
   }
-  for (Prolongation& p : prolongation_) p.weight_f.assign(p.weight.begin(), p.weight.end());
 }
 
 // ---- multigrid: the values (every step)
@@ -403,62 +380,56 @@ void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
 // ---- multigrid: the V-cycle
 
 void Multigrid::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
-  Eigen::Matrix4Xf& b = rhs_[0];
-  for (int i = 0; i < b.cols(); ++i) b.col(i) << static_cast<float>(r[3 * i]), static_cast<float>(r[3 * i + 1]), static_cast<float>(r[3 * i + 2]), 0.0f;
+  rhs_[0] = r;
   cycle(0);
-  z.resize(r.size());
-  const Eigen::Matrix4Xf& x = solution_[0];
-  for (int i = 0; i < x.cols(); ++i) at(z, i) = x.col(i).head<3>().cast<double>();
+  z = solution_[0];
 }
 
 void Multigrid::cycle(int level) const {
   const BlockMatrix& a = matrix_[level];
-  const Eigen::Matrix4Xf& b = rhs_[level];
-  Eigen::Matrix4Xf& x = solution_[level];
+  const Eigen::VectorXd& b = rhs_[level];
+  Eigen::VectorXd& x = solution_[level];
   if (level + 1 == static_cast<int>(matrix_.size())) {
-    Eigen::VectorXd dense(3 * a.size);
-    for (int i = 0; i < a.size; ++i) at(dense, i) = b.col(i).head<3>().cast<double>();
-    dense = coarsest_.solve(dense);
-    for (int i = 0; i < a.size; ++i) x.col(i) << at(dense, i).cast<float>(), 0.0f;
+    x = coarsest_.solve(b);
     return;
   }
   const auto& inverse = inverse_diagonal_[level];
   // forward Gauss-Seidel from zero: only the blocks before i are set yet
   for (int i = 0; i < a.size; ++i) {
-    Vec4f s = b.col(i);
-    for (int k = a.start[i]; k < a.diagonal[i]; ++k) s -= times_block(a.block_f[k], x.col(a.column[k]));
-    x.col(i) = lanes3(times_block(inverse[i], s));
+    Vec3 s = at(b, i);
+    for (int k = a.start[i]; k < a.diagonal[i]; ++k) s.noalias() -= a.block_f[k].cast<double>() * at(x, a.column[k]);
+    at(x, i) = inverse[i] * s;
   }
   // the residual b - A x: row i's sweep left b_i - sum_(j <= i) A_ij x_j = 0, so only the
   // blocks after i remain (half a product)
-  Eigen::Matrix4Xf& res = residual_[level];
+  Eigen::VectorXd& res = residual_[level];
   for (int i = 0; i < a.size; ++i) {
-    Vec4f s = Vec4f::Zero();
-    for (int k = a.diagonal[i] + 1; k < a.start[i + 1]; ++k) s -= times_block(a.block_f[k], x.col(a.column[k]));
-    res.col(i) = lanes3(s);
+    Vec3 s = Vec3::Zero();
+    for (int k = a.diagonal[i] + 1; k < a.start[i + 1]; ++k) s.noalias() -= a.block_f[k].cast<double>() * at(x, a.column[k]);
+    at(res, i) = s;
   }
   // restrict it: b_c = P^T (b - A x)
   const Prolongation& p = prolongation_[level];
-  Eigen::Matrix4Xf& coarse_rhs = rhs_[level + 1];
+  Eigen::VectorXd& coarse_rhs = rhs_[level + 1];
   coarse_rhs.setZero();
   for (int i = 0; i < a.size; ++i) {
-    for (int e = p.start[i]; e < p.start[i + 1]; ++e) coarse_rhs.col(p.coarse[e]) += p.weight_f[e] * res.col(i);
+    for (int e = p.start[i]; e < p.start[i + 1]; ++e) at(coarse_rhs, p.coarse[e]) += p.weight[e] * at(res, i);
   }
   // coarse correction: x += P x_c
   cycle(level + 1);
-  const Eigen::Matrix4Xf& coarse_x = solution_[level + 1];
+  const Eigen::VectorXd& coarse_x = solution_[level + 1];
   for (int i = 0; i < a.size; ++i) {
-    Vec4f s = Vec4f::Zero();
-    for (int e = p.start[i]; e < p.start[i + 1]; ++e) s += p.weight_f[e] * coarse_x.col(p.coarse[e]);
-    x.col(i) += s;
+    Vec3 s = Vec3::Zero();
+    for (int e = p.start[i]; e < p.start[i + 1]; ++e) s += p.weight[e] * at(coarse_x, p.coarse[e]);
+    at(x, i) += s;
   }
   // backward Gauss-Seidel
   for (int i = a.size - 1; i >= 0; --i) {
-    Vec4f s = b.col(i);
+    Vec3 s = at(b, i);
     for (int k = a.start[i]; k < a.start[i + 1]; ++k) {
-      if (k != a.diagonal[i]) s -= times_block(a.block_f[k], x.col(a.column[k]));
+      if (k != a.diagonal[i]) s.noalias() -= a.block_f[k].cast<double>() * at(x, a.column[k]);
     }
-    x.col(i) = lanes3(times_block(inverse[i], s));
+    at(x, i) = inverse[i] * s;
   }
 }
 

@@ -86,7 +86,6 @@ struct Prolongation {
   std::vector<int> start;        // (fine + 1)
   std::vector<int> coarse;       // (entries)
   std::vector<double> weight;    // (entries)
-  std::vector<float> weight_f;   // (entries) the same in single precision (the V-cycle's)
 };
 
 class Multigrid final : public Preconditioner {
@@ -117,12 +116,10 @@ class Multigrid final : public Preconditioner {
   std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
   std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l
   std::vector<Recipe> right_, left_;          // (levels - 1) A P from A, then P^T (A P)
-  // per level, single precision (+ one block of padding: multigrid.cpp, times_block)
-  std::vector<std::vector<Eigen::Matrix3f, Eigen::aligned_allocator<Eigen::Matrix3f>>> inverse_diagonal_;
+  std::vector<std::vector<Mat3, Eigen::aligned_allocator<Mat3>>> inverse_diagonal_;  // per level
   Eigen::LLT<Eigen::MatrixXd> coarsest_;      // dense Cholesky of the coarsest level
-  // V-cycle scratch per level: right-hand side, solution, residual, in single precision,
-  // one column of four floats per block (the fourth zero)
-  mutable std::vector<Eigen::Matrix4Xf> rhs_, solution_, residual_;
+  // V-cycle scratch per level: right-hand side, solution, residual
+  mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;
 
   void cycle(int level) const;
 };
