@@ -246,10 +246,16 @@ void for_each_block(Eigen::SparseMatrix<double>& a, Visit&& visit) {
   }
 }
 
+// each of `blocks` blocks' filter (its index in `filter`), -1 where it has none
+std::vector<int> filter_of(const std::vector<Filter>& filter, Eigen::Index blocks) {
+  std::vector<int> which(blocks, -1);
+  for (size_t f = 0; f < filter.size(); ++f) which[filter[f].block] = static_cast<int>(f);
+  return which;
+}
+
 // a <- S a S + (I - S), S the filter's block-diagonal projector (identity off the filter)
 void filter_system(const std::vector<Filter>& filter, Eigen::SparseMatrix<double>& a) {
-  std::vector<int> which(a.cols() / 3, -1);  // each block's filter, if any
-  for (size_t f = 0; f < filter.size(); ++f) which[filter[f].block] = static_cast<int>(f);
+  const std::vector<int> which = filter_of(filter, a.cols() / 3);
   const auto project = [&](int b) { return Mat3(Mat3::Identity() - filter[which[b]].held()); };
   for_each_block(a, [&](int r, int c, auto& block) {
     if (which[r] < 0 && which[c] < 0) return;
@@ -265,8 +271,7 @@ struct HeldRows {
   std::vector<std::vector<std::pair<int, Vec3>>> rows;  // (filter) (column, the 3 rows' values there)
   HeldRows() = default;
   HeldRows(Eigen::SparseMatrix<double>& a, const std::vector<Filter>& filter) : rows(filter.size()) {
-    std::vector<int> which(a.cols() / 3, -1);
-    for (size_t f = 0; f < filter.size(); ++f) which[filter[f].block] = static_cast<int>(f);
+    const std::vector<int> which = filter_of(filter, a.cols() / 3);
     // row block r of a symmetric matrix is its column block r transposed
     for_each_block(a, [&](int r, int c, auto& block) {
       if (which[c] < 0) return;
