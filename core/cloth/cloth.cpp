@@ -229,23 +229,6 @@ void apply_filter(const std::vector<Filter>& filter, Eigen::VectorXd& x) {
   }
 }
 
-// A 3x3 block (row block r, column block c) of a full symmetric Eigen matrix of dense 3x3
-// blocks: block column c holds its blocks at the same offset k (from the column's start) in
-// each of its three columns (cloth_detail::block_matrix reads the same layout)
-template <typename Visit>
-void for_each_block(Eigen::SparseMatrix<double>& a, Visit&& visit) {
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
-  double* values = a.valuePtr();
-  for (int c = 0; c < a.cols() / 3; ++c) {
-    const int length = outer[3 * c + 1] - outer[3 * c];
-    for (int k = 0; k < length; k += 3) {
-      Eigen::Map<Mat3, 0, Eigen::OuterStride<>> block(values + outer[3 * c] + k, 3, 3, Eigen::OuterStride<>(length));
-      visit(inner[outer[3 * c] + k] / 3, c, block);
-    }
-  }
-}
-
 // each of `blocks` blocks' filter (its index in `filter`), -1 where it has none
 std::vector<int> filter_of(const std::vector<Filter>& filter, Eigen::Index blocks) {
   std::vector<int> which(blocks, -1);
@@ -257,7 +240,7 @@ std::vector<int> filter_of(const std::vector<Filter>& filter, Eigen::Index block
 void filter_system(const std::vector<Filter>& filter, Eigen::SparseMatrix<double>& a) {
   const std::vector<int> which = filter_of(filter, a.cols() / 3);
   const auto project = [&](int b) { return Mat3(Mat3::Identity() - filter[which[b]].held()); };
-  for_each_block(a, [&](int r, int c, auto& block) {
+  cloth_detail::for_each_block(a, [&](int r, int c, auto& block) {
     if (which[r] < 0 && which[c] < 0) return;
     if (which[r] >= 0) block = project(r) * block;
     if (which[c] >= 0) block = block * project(c);
@@ -273,7 +256,7 @@ struct HeldRows {
   HeldRows(Eigen::SparseMatrix<double>& a, const std::vector<Filter>& filter) : rows(filter.size()) {
     const std::vector<int> which = filter_of(filter, a.cols() / 3);
     // row block r of a symmetric matrix is its column block r transposed
-    for_each_block(a, [&](int r, int c, auto& block) {
+    cloth_detail::for_each_block(a, [&](int r, int c, auto& block) {
       if (which[c] < 0) return;
       for (int q = 0; q < 3; ++q) rows[which[c]].emplace_back(3 * r + q, Vec3(block.row(q)));
     });

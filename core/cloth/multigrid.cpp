@@ -193,20 +193,13 @@ void invert_diagonal(const BlockMatrix& m, std::vector<Mat3, Eigen::aligned_allo
 // ---- block matrices
 
 BlockMatrix block_matrix(const Eigen::SparseMatrix<double>& pattern) {
-  // block column b of the Eigen matrix holds the blocks (j, b), 3 rows each, at the same
-  // offset in its three columns; for a symmetric matrix they are row b's blocks, transposed
-  const int n = static_cast<int>(pattern.cols() / 3);
-  std::vector<std::vector<int>> rows(n);
+  std::vector<std::vector<int>> rows(pattern.cols() / 3);
   std::vector<int> source, stride;
-  const int* outer = pattern.outerIndexPtr();
-  const int* inner = pattern.innerIndexPtr();
-  for (int b = 0; b < n; ++b) {
-    for (int k = outer[3 * b]; k < outer[3 * b + 1]; k += 3) {
-      rows[b].push_back(inner[k] / 3);
-      source.push_back(k);
-      stride.push_back(outer[3 * b + 1] - outer[3 * b]);
-    }
-  }
+  for_each_block(pattern, [&](int r, int c, const auto& block) {
+    rows[c].push_back(r);
+    source.push_back(static_cast<int>(block.data() - pattern.valuePtr()));
+    stride.push_back(static_cast<int>(block.outerStride()));
+  });
   BlockMatrix m = block_pattern(rows);
   m.source = std::move(source);
   m.stride = std::move(stride);

@@ -23,6 +23,7 @@
 #include <Eigen/SparseCore>
 
 #include <memory>
+#include <type_traits>
 #include <vector>
 
 namespace simbake::cloth_detail {
@@ -45,6 +46,26 @@ struct BlockMatrix {
   // (copy_values): its (0, 0) entry, and the distance between its three columns there
   std::vector<int> source, stride;
 };
+
+// visit(r, c, block) for every 3x3 block (row block r, column block c) of a full symmetric
+// Eigen matrix of dense 3x3 blocks, column block by column block, as an Eigen::Map onto its
+// values (const for a const matrix): block column c holds its blocks at the same offset k
+// (from the column's start) in each of its three columns; for a symmetric matrix they are
+// row c's blocks, transposed
+template <typename Matrix, typename Visit>
+void for_each_block(Matrix& a, Visit&& visit) {
+  using Block = std::conditional_t<std::is_const_v<Matrix>, const Mat3, Mat3>;
+  const int* outer = a.outerIndexPtr();
+  const int* inner = a.innerIndexPtr();
+  auto* values = a.valuePtr();
+  for (int c = 0; c < a.cols() / 3; ++c) {
+    const int length = outer[3 * c + 1] - outer[3 * c];
+    for (int k = 0; k < length; k += 3) {
+      Eigen::Map<Block, 0, Eigen::OuterStride<>> block(values + outer[3 * c] + k, 3, 3, Eigen::OuterStride<>(length));
+      visit(inner[outer[3 * c] + k] / 3, c, block);
+    }
+  }
+}
 
 // The block matrix of an Eigen matrix's pattern (full symmetric storage, dense 3x3 blocks),
 // values zero, with the positions copy_values reads
