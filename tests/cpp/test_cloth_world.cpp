@@ -205,6 +205,57 @@ TEST(ClothWorld, PinchedClothHoldsAHeavyBoxOffTheGround) {
   EXPECT_LT(world.body_state(0).v.norm(), 0.05);
 }
 
+// The same box set down on a cloth folded flat into three layers on the ground (a Z fold,
+// layers h apart): the spacer is as wide as the layers need, (3 + 1) h, and the box rests
+// there. With a spacer of 3h whatever lay between, the box sank to 3h onto layers that
+// cannot fit in it, and the layers or a body gave way (cloth_demo's ring, resting on a fold
+// of three layers, came to 13 mm above the ground and its edges went through the top layer)
+TEST(ClothWorld, PinchedLayersHoldABoxAsHighAsTheyNeed) {
+  const double h = 0.005, width = 0.6;
+  const int columns = 13, rows = 13;  // a layer's, 5 cm apart
+  ClothDesc d;
+  d.rest.resize(3 * columns * rows, 3);
+  for (int layer = 0; layer < 3; ++layer) {
+    for (int c = 0; c < columns; ++c) {
+      // layer 1 runs along +x, layer 2 back, layer 3 along +x again; each fold is an edge
+      // h long, straight up from one layer's last column to the next one's first
+      const double u = static_cast<double>(layer % 2 == 0 ? c : columns - 1 - c) / (columns - 1);
+      for (int r = 0; r < rows; ++r) {
+        d.rest.row((layer * columns + c) * rows + r) << width * (u - 0.5), (layer + 1) * h,
+            width * (static_cast<double>(r) / (rows - 1) - 0.5);
+      }
+    }
+  }
+  d.triangles.resize(2 * (3 * columns - 1) * (rows - 1), 3);
+  int t = 0;
+  for (int c = 0; c + 1 < 3 * columns; ++c) {
+    for (int r = 0; r + 1 < rows; ++r) {
+      const int p00 = c * rows + r, p01 = p00 + 1, p10 = p00 + rows, p11 = p10 + 1;
+      d.triangles.row(t++) << p00, p01, p11;
+      d.triangles.row(t++) << p00, p11, p10;
+    }
+  }
+  World world;
+  world.set_ground(GroundDef{0.0, 0.5, 0.0});
+  world.add_cloth(d, 0.4, h);
+  world.add_body(box_body(Vec3::Constant(0.4), 20.0, Vec3(0.0, 0.2 + 4.0 * h, 0.0)));
+  double deepest = 0.0;
+  long long crossings = 0;
+  for (int f = 0; f < 24; ++f) {
+    world.step_frame(1.0 / 24.0);
+    deepest = std::max(deepest, world.statistics().cloth_penetration);
+    crossings += cloth_quality(world, 0).self_intersections;
+  }
+  const double bottom = world.body_state(0).x.y() - 0.2;
+  std::printf("  three layers pinched: box bottom %.2f mm above the ground, cloth %.3f mm deep at most\n",
+              1000 * bottom, 1000 * deepest);
+  EXPECT_GT(bottom, 3.5 * h);
+  EXPECT_LT(bottom, 5.0 * h);
+  EXPECT_LT(deepest, 0.5e-3);
+  EXPECT_EQ(crossings, 0);
+  EXPECT_LT(world.body_state(0).v.norm(), 0.05);
+}
+
 // A box's corner rising through a flap pinned along one edge, right by the pins: a point there
 // is moved only through the flap's free vertices, which would have to move ever faster the
 // nearer the pins it is (the lever about them). Pushed that way, the free vertices went to

@@ -54,9 +54,7 @@ DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
 # (scene, check) pairs that fail today, each a limitation in the README: the test then
 # reports them as an expected failure (with the frames and figures) instead of passing;
 # layers through layers are never excused
-# cloth_demo over its whole length: the ring lands on a fold crushed against the ground and
-# 2-4 of its edges go through the top layer at frames 87 and 95-97 (README, limitations)
-KNOWN_GAPS: set = {("cloth_demo", "mesh_through")}
+KNOWN_GAPS: set = set()
 
 
 def mesh_edges(triangles: np.ndarray) -> np.ndarray:
