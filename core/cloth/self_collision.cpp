@@ -174,26 +174,35 @@ void coplanarity_cubic(const Vec3 x[4], const Vec3 d[4], double coef[4]) {
 
 // Applies an impulse along the contact's normal that brings the pair's relative normal
 // velocity up to `target` (never down), with Coulomb friction on the relative slip limited
-// by the same change; returns whether it did anything
+// by the same change; returns whether it did anything. With `support` (repulsions: see
+// SelfCollisionSettings::support), a vertex resting on a still surface (the normal of the
+// surfaces it rests on this step, or zero) that the impulse would push into that surface
+// takes none of it, as a pinned vertex: the surface holds it, and the pair's other vertices
+// take the change
 bool apply_impulse(const SelfCollision::Contact& c, double target, double friction, Points& v,
-                   const Eigen::VectorXd& inverse_mass) {
-  double denom = 0.0;
+                   const Eigen::VectorXd& inverse_mass, const std::vector<Vec3>* support) {
   Vec3 relative = Vec3::Zero();
-  for (int k = 0; k < 4; ++k) {
-    denom += c.weight[k] * c.weight[k] * inverse_mass[c.vertex[k]];
-    relative += c.weight[k] * row(v, c.vertex[k]);
-  }
-  if (denom <= 0.0) return false;
+  for (int k = 0; k < 4; ++k) relative += c.weight[k] * row(v, c.vertex[k]);
   const double vn = relative.dot(c.normal);
   const double change = target - vn;
   if (!(change > 0.0)) return false;
+  // each vertex's share of the change moves it along weight x normal: into its support if
+  // that points against the support's normal
+  double mass[4], denom = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    const int i = c.vertex[k];
+    mass[k] = inverse_mass[i];
+    if (support && c.weight[k] * c.normal.dot((*support)[i]) < 0.0) mass[k] = 0.0;
+    denom += c.weight[k] * c.weight[k] * mass[k];
+  }
+  if (denom <= 0.0) return false;
   Vec3 delta = change * c.normal;  // the wanted change of the relative velocity
   const Vec3 slip = relative - vn * c.normal;
   const double slip_speed = slip.norm();
   if (slip_speed > 0.0) delta -= std::min(1.0, friction * change / slip_speed) * slip;
   for (int k = 0; k < 4; ++k) {
     const int i = c.vertex[k];
-    v.row(i) += (c.weight[k] * inverse_mass[i] / denom) * delta.transpose();
+    v.row(i) += (c.weight[k] * mass[k] / denom) * delta.transpose();
   }
   return true;
 }
@@ -1138,7 +1147,8 @@ void SelfCollision::repel(const Points& x, Points& v, const Eigen::VectorXd& inv
   for (size_t k = 0; k < contacts.size(); ++k) {
     Contact c = contacts[k];
     if (next != touching.end() && next->first == k) c.normal = (next++)->second;
-    stats.repulsions += apply_impulse(c, kRepulsionRate * (h - c.distance) / dt, settings.friction, v, inverse_mass);
+    stats.repulsions += apply_impulse(c, kRepulsionRate * (h - c.distance) / dt, settings.friction, v, inverse_mass,
+                                      settings.support);
   }
 }
 
@@ -1149,7 +1159,9 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
   for (int pass = 0; pass < passes; ++pass) {
     collision_contacts(x, v, dt, settings, contacts, stats);
     if (contacts.empty()) return true;
-    for (const Contact& c : contacts) stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass);
+    for (const Contact& c : contacts) {
+      stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass, /*support=*/nullptr);
+    }
   }
   return false;
 }

@@ -78,6 +78,17 @@ struct SelfCollisionSettings {
   double friction = 0.3;      // Coulomb coefficient of the cloth on itself
   int collision_passes = 4;   // impulse passes of continuous detection before impact zones
   int zone_iterations = 50;   // impact-zone rounds before the last resort (the cloth holds still)
+  // (n) or null: for each vertex resting on a still surface this step (the ground, a static
+  // body), the normal of that surface (any length), else zero. A repulsion that would push
+  // such a vertex into its surface leaves it where it is and moves the pair's other
+  // vertices instead: the surface holds it. Without this, layers landing on the heap shared
+  // their repulsions with its bottom layer as if nothing were under it, and self-collision,
+  // which has the last word in a step, put it 3.8 mm into the ground (0 mm with it). The
+  // collision impulses (continuous detection) still share theirs with every vertex of the
+  // pair, so that a pair whose vertices are all held can still be parted before the impact
+  // zones; with them held too the heap's landing ended a step at 10.16% strain (the
+  // limiter and the collisions did not agree within the final rounds), at 10.06% without
+  const std::vector<Vec3>* support = nullptr;
 };
 
 struct SelfCollisionStatistics {

@@ -208,9 +208,12 @@ void ClothBodyContact::contact_constraints(const Cloth& cloth, const ContactBodi
     out.push_back(held);
     touches.constrained_body.push_back(body);
   }
-  // this step's contacts are recorded afresh
-  std::fill(touches.normal.begin(), touches.normal.end(), Vec3::Zero());
-  std::fill(touches.stuck.begin(), touches.stuck.end(), 0);
+  forget_touches();
+}
+
+void ClothBodyContact::forget_touches() {
+  std::fill(touches_.normal.begin(), touches_.normal.end(), Vec3::Zero());
+  std::fill(touches_.stuck.begin(), touches_.stuck.end(), 0);
 }
 
 // After the solve, for each held vertex: one the surface had to pull is let go in the next

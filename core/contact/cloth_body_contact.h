@@ -69,7 +69,8 @@ class ContactBodies {
 
 // One cloth's contacts with the bodies and the ground, and what they keep from one step to
 // the next. The stages, in the order a cloth step calls them:
-//   contact_constraints        the contacts the implicit solve holds (before it)
+//   contact_constraints        the contacts the implicit solve holds (before it), or
+//                              forget_touches when the solve holds none
 //   apply_constraint_impulses  their friction, and which are let go (after it)
 //   collide                    the candidates x + dt v pushed out to the thickness (many times)
 //   hold_pinched_bodies        bodies pinching the cloth held apart (last)
@@ -81,8 +82,15 @@ class ClothBodyContact {
   double thickness() const { return thickness_; }
   const Eigen::VectorXd& inverse_mass() const { return inverse_mass_; }
   const std::vector<std::array<int, 2>>& edges() const { return edges_; }
+  // (nvert) for each vertex, the sum of the normals of the still surfaces (the ground, static
+  // bodies, kinematic ones not moving) whose contacts pushed it or held it this step, by
+  // weight; zero where none did (self-collision's SelfCollisionSettings::support)
+  const std::vector<Vec3>& support() const { return touches_.normal; }
 
   void contact_constraints(const Cloth& cloth, const ContactBodies& bodies, std::vector<ClothContactConstraint>& out);
+  // this step's contacts recorded afresh (contact_constraints does it after reading the last
+  // step's; a step without it calls this instead)
+  void forget_touches();
   void apply_constraint_impulses(Cloth& cloth, const ContactBodies& bodies,
                                  const std::vector<ClothContactConstraint>& constraints);
   void collide(Cloth& cloth, ContactBodies& bodies, double dt);

@@ -96,6 +96,7 @@ void World::step_cloths(double dt) {
     SelfCollisionSettings self_settings;
     self_settings.thickness = contact.thickness();
     self_settings.friction = contact.friction();
+    self_settings.support = &contact.support();
     const Eigen::VectorXd& inverse_mass = contact.inverse_mass();
     // the bodies as the contacts see them, posed as they are now (only the pinches at the
     // end of this cloth's step move them)
@@ -121,9 +122,13 @@ void World::step_cloths(double dt) {
     {
       // the contacts the solve holds, and their friction after it, are contacts' time
       std::vector<ClothContactConstraint> constraints;
-      if (settings_.cloth_contacts_in_solve) {
+      {
         ScopedTimer timer(profile_.cloth_contacts);
-        contact.contact_constraints(cloth, bodies, constraints);
+        if (settings_.cloth_contacts_in_solve) {
+          contact.contact_constraints(cloth, bodies, constraints);
+        } else {
+          contact.forget_touches();
+        }
       }
       {
         ScopedTimer timer(profile_.cloth_forces);

@@ -64,6 +64,43 @@ TEST(SelfCollision, PointStoppedAtATriangle) {
   EXPECT_NEAR(v(3, 1), under, 0.1);
 }
 
+TEST(SelfCollision, ARepulsionLeavesAVertexOnItsSupport) {
+  // a triangle lying on the ground (its vertices' support: the ground's normal, +y) and a
+  // point 2 mm above its middle coming down at 1 m/s, inside the 5 mm thickness: the
+  // repulsion stops the point's approach and pushes it up by 0.1 (h - d) / dt. Unsupported,
+  // the triangle takes half the change (equal masses, weights 1 and 1/3 x 3): pushed down,
+  // into the ground. Supported, it keeps its velocity and the point takes the whole change
+  const double h = 0.005, dt = 0.01, d = 0.002;
+  Points x(4, 3), v(4, 3);
+  x << 0, 0, 0, 1, 0, 0, 0, 0, 1, 1.0 / 3, d, 1.0 / 3;
+  Triangles t(1, 3);
+  t << 0, 2, 1;
+  const Eigen::VectorXd inverse_mass = Eigen::VectorXd::Ones(4);
+  const double target = 0.1 * (h - d) / dt;  // the relative normal velocity a repulsion sets
+  for (const bool supported : {false, true}) {
+    v.setZero();
+    v(3, 1) = -1.0;
+    std::vector<Vec3> support(4, Vec3::Zero());
+    if (supported) support[0] = support[1] = support[2] = Vec3(0.0, 2.0, 0.0);  // any length
+    SelfCollisionSettings settings{h, 0.0};
+    settings.support = &support;
+    SelfCollision self(t, 4);
+    SelfCollisionStatistics stats;
+    self.repel(x, v, inverse_mass, dt, settings, stats);
+    EXPECT_EQ(stats.repulsions, 1);
+    const double under = (v(0, 1) + v(1, 1) + v(2, 1)) / 3;
+    EXPECT_NEAR(v(3, 1) - under, target, 1e-12) << supported;
+    if (supported) {
+      for (int k = 0; k < 3; ++k) EXPECT_EQ(v.row(k).norm(), 0.0) << k;
+      EXPECT_NEAR(v(3, 1), target, 1e-12);
+    } else {
+      // the change shared by inverse mass x weight: denominator 1 + 3 (1/3)^2 = 4/3
+      EXPECT_NEAR(under, -(target + 1.0) / (4.0 / 3.0) / 3, 1e-12);
+      EXPECT_LT(under, 0.0);
+    }
+  }
+}
+
 TEST(SelfCollision, CrossingEdgesStopped) {
   // edge (0, 1) along x at y = 0.05 falls through edge (2, 3) along z at y = 0 in one step
   Points x(6, 3), v(6, 3);
