@@ -9,6 +9,10 @@ side with Blender's cloth modifier, Newton's VBD (CPU) and MuJoCo's flex.
     python3 benchmarks/cloth/compare.py --report     # tables and plots from the saved runs
     taskset -c 0 python3 benchmarks/cloth/compare.py --engines simbake --resolutions 17 33 65 &
     taskset -c 1 python3 benchmarks/cloth/compare.py --engines simbake --resolutions 129 257 --suffix _big
+    taskset -c 0 python3 benchmarks/cloth/compare.py --engines simbake --labels default --fresh --suffix _alone
+                                                     # the per-doubling figures: one run at a time, the
+                                                     # other CPU idle (257 is bound by memory traffic,
+                                                     # which a run on the other CPU shares)
 
 Each run is one subprocess of the engine's runner (simbake: .venv; Blender, Newton and MuJoCo:
 the venvs of benchmarks/peers, see its README), pinned to one CPU with the thread variables
@@ -283,6 +287,8 @@ def main() -> None:
     parser.add_argument("--report", action="store_true", help="no runs: report the saved ones")
     parser.add_argument("--timeout", type=float, default=1800.0, help="per run (s)")
     parser.add_argument("--resolutions", type=int, nargs="+", help="only the runs at these resolutions")
+    parser.add_argument("--labels", nargs="+", help="only the runs of these settings (default, reference, "
+                        "explicit, membrane, ...)")
     parser.add_argument("--suffix", default="", help="save to cloth_runs_<engine><suffix>.json (for drivers "
                         "running at once, e.g. pinned to different CPUs)")
     args = parser.parse_args()
@@ -295,7 +301,7 @@ def main() -> None:
         runs.update(json.loads(path.read_text()))
     plan = RUNS_SELF if args.self_collision else RUNS_FULL
     plan = [r for r in plan if r[0] in args.engines and (not args.resolutions or r[1] in args.resolutions)
-            and (not args.quick or r[1] in (17, 33))]
+            and (not args.quick or r[1] in (17, 33)) and (not args.labels or r[3] in args.labels)]
     if not args.report:
         for engine, n, extra, label in plan:
             key = run_key(engine, n, extra)
