@@ -7,7 +7,8 @@
 
 namespace simbake {
 
-void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& points, std::vector<Vec3>& normals) {
+void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& points, std::vector<Vec3>& normals,
+                       std::vector<FeatureEdge>* edges) {
   // each edge runs along axis i, at signs (s1, s2) of the two other axes; its interior points
   // first, then the corners once each
   for (int i = 0; i < 3; ++i) {
@@ -19,6 +20,17 @@ void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& poin
         normal[j] = sj;
         normal[k] = sk;
         normal.normalize();
+        if (edges) {
+          Vec3 a, n1 = Vec3::Zero(), n2 = Vec3::Zero();
+          a[j] = sj * half[j];
+          a[k] = sk * half[k];
+          a[i] = -half[i];
+          Vec3 b = a;
+          b[i] = half[i];
+          n1[j] = sj;
+          n2[k] = sk;
+          edges->push_back({a, b, n1, n2});
+        }
         for (int q = 1; q < count; ++q) {
           Vec3 p;
           p[i] = -half[i] + 2.0 * half[i] * q / count;
@@ -47,7 +59,7 @@ double sharp_crease_angle(double thickness, double mean_edge) {
 }
 
 void mesh_edge_features(const Points& vertices, const Triangles& triangles, double spacing, double sharp_angle,
-                        std::vector<Vec3>& points, std::vector<Vec3>& normals) {
+                        std::vector<Vec3>& points, std::vector<Vec3>& normals, std::vector<FeatureEdge>* edges) {
   constexpr double kFlat = 1e-3;  // (rad) creases under this are flat (a face's diagonal, round-off)
   const double sharp = std::max(sharp_angle, kFlat);
   const int nv = static_cast<int>(vertices.rows()), nt = static_cast<int>(triangles.rows());
@@ -110,9 +122,15 @@ void mesh_edge_features(const Points& vertices, const Triangles& triangles, doub
       const double angle = std::atan2(n1.cross(n2).norm(), n1.dot(n2));
       feature = angle > sharp && n1.dot(vertex(far) - vertex(a)) < 0.0;
     }
+    const size_t s_first = s;
     s = e;
     if (!feature || !(normal.norm() > 0.0)) continue;
     normal.normalize();
+    if (edges) {
+      const Vec3& n1 = face_normal[sides[s_first].second];
+      const Vec3& n2 = face_normal[sides[e - 1].second];
+      edges->push_back({vertex(a), vertex(b), n1, n2});
+    }
     // the edge's inner points (its ends are corners)
     const Vec3 p = vertex(a), d = vertex(b) - p;
     const int count = std::max(1, static_cast<int>(std::ceil(d.norm() / spacing)));

@@ -40,15 +40,25 @@
 
 namespace simbake {
 
+// A sharp edge of a body, in its own coordinates: from a to b, between faces of outward unit
+// normals n1 and n2 (equal for a boundary edge). A point whose direction d from the edge
+// (across it) has d . n1 > 0 or d . n2 > 0 is outside the body there (the edge is convex)
+struct FeatureEdge {
+  Vec3 a, b, n1, n2;
+};
+
 // Points along the 12 edges of a box of half extents `half` centred at the origin (corners
-// included, once each), at most `spacing` apart, and their outward normals
-void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& points, std::vector<Vec3>& normals);
+// included, once each), at most `spacing` apart, and their outward normals; and, if asked,
+// the 12 edges themselves
+void box_edge_features(const Vec3& half, double spacing, std::vector<Vec3>& points, std::vector<Vec3>& normals,
+                       std::vector<FeatureEdge>* edges = nullptr);
 
 // Points and their outward unit normals, in the body's coordinates (m)
 struct BodyFeatures {
   std::vector<Vec3> points;   // (nfeature) on the body's surface (m)
   std::vector<Vec3> normals;  // (nfeature) the normalized sum of the normals of the faces there
   Box3 bounds;                // of the points (m)
+  std::vector<FeatureEdge> edges;    // the sharp edges the points lie along, whole (ClothBodyContact's edge contacts)
   std::vector<double> inside_below;  // (nfeature) a point behind the feature is inside the body where the
                                      // body's phi is below this (m): 0, or the level set's own phi at the
                                      // feature where it rounds a sharp edge (see ClothBodyContact::collide_features)
@@ -67,7 +77,8 @@ double sharp_crease_angle(double thickness, double mean_edge);
 // weighted by their angles there: (1, 1, 1) / sqrt(3) at a cube's corner however its faces
 // are split)
 void mesh_edge_features(const Points& vertices, const Triangles& triangles, double spacing, double sharp_angle,
-                        std::vector<Vec3>& points, std::vector<Vec3>& normals);
+                        std::vector<Vec3>& points, std::vector<Vec3>& normals,
+                        std::vector<FeatureEdge>* edges = nullptr);
 
 // A feature f (outward normal nf) against triangle (a, b, c): true when f's projection lies
 // inside the triangle and the plane is within (-band, h) ahead of f; then the barycentric
@@ -83,6 +94,8 @@ class TriangleGrid {
   void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region);
   // the triangles whose grown box's cells include p's cell, in increasing order
   void query(const Vec3& p, std::vector<int>& out) const;
+  // p's cell (two points in the same cell have the same query)
+  long long cell(const Vec3& p) const { return key(p); }
 
  private:
   long long key(const Vec3& p) const;

@@ -22,10 +22,12 @@
 // (world/cloth_stages.cpp), with strain limiting and self-collision in between.
 #include "contact/cloth_body_contact.h"
 
+#include "geometry/closest_points.h"
 #include "rigid/impulse.h"
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace simbake {
 
@@ -35,6 +37,7 @@ constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its 
 constexpr double kPinchGap = 3.0;          // x h: the least gap a pinch holds open (two layers)
 constexpr double kPinchReach = 6.0;        // x h: the widest gap looked at for layers (up to 5)
 constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
+constexpr double kEdgeReach = 2.0;         // x h: a cloth edge inside a body within this of a body edge went over it
 constexpr double kMaxLever = 4.0;         // a contact moves no cloth vertex faster than this many times its
                                           // point's velocity change (see collide's contact_point)
 
@@ -71,7 +74,18 @@ ClothBodyContact::ClothBodyContact(const Cloth& cloth, double friction, double t
   for (int k = 0; k < cloth.vertex_count(); ++k) {
     if (cloth.pinned()[k]) inverse_mass_[k] = 0.0;
   }
-  edges_ = unique_edges(cloth.triangles());
+  edges_ = unique_edges(cloth.triangles());  // sorted
+  const Triangles& triangles = cloth.triangles();
+  triangle_edges_.resize(triangles.rows());
+  for (int t = 0; t < triangles.rows(); ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const int i = triangles(t, k), j = triangles(t, (k + 1) % 3);
+      const std::array<int, 2> e{std::min(i, j), std::max(i, j)};
+      triangle_edges_[t][k] = static_cast<int>(std::lower_bound(edges_.begin(), edges_.end(), e) - edges_.begin());
+    }
+  }
+  triangle_seen_.assign(triangles.rows(), -1);
+  edge_seen_.assign(edges_.size(), -1);
   double total = 0.0;
   for (const auto& e : edges_) total += (cloth.positions().row(e[1]) - cloth.positions().row(e[0])).norm();
   mean_edge_ = total / static_cast<double>(std::max<size_t>(1, edges_.size()));
@@ -96,10 +110,10 @@ const BodyFeatures& ClothBodyContact::body_features(const ContactBodies& bodies,
   const SignedDistance* shape = body.shape;
   const double h = thickness_, spacing = 0.25 * mean_edge_;
   if (const auto* box = dynamic_cast<const BoxDistance*>(shape)) {
-    box_edge_features(box->half(), spacing, features->points, features->normals);
+    box_edge_features(box->half(), spacing, features->points, features->normals, &features->edges);
   } else if (shape && body.mesh && body.mesh->triangles.rows() > 0) {
     mesh_edge_features(body.mesh->vertices, body.mesh->triangles, spacing, sharp_crease_angle(h, mean_edge_),
-                       features->points, features->normals);
+                       features->points, features->normals, &features->edges);
   }
   for (const Vec3& p : features->points) {
     features->inside_below.push_back(std::clamp(shape->phi(p), 0.0, 0.5 * h));
@@ -151,7 +165,89 @@ bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies&
       const Vec3 xc = p + phi * normal;
       if (phi < 0.0 && shape.phi(pose.apply_inverse(xc)) >= features.inside_below[f]) continue;
       const double weights[3] = {w[0], w[1], w[2]};
-      contact(ids, weights, xc, normal, phi);
+      contact(ids, weights, 3, xc, normal, phi);
+      touched = true;
+    }
+  }
+  // the body's sharp edges against the cloth's edges: where a cloth edge passes within h of a
+  // body edge between the ends of both, the cloth edge's point there is pushed out to h, along
+  // the line joining the two (outside the body: that line leaves the edge on the outer side
+  // of one of its faces), or along the level set where it is inside. The feature points
+  // above, and the samples of each cloth edge against the level set, miss this: a cloth edge
+  // sweeping past a body edge nearly square to it (a box pushed into a sheet lying on the
+  // ground, its vertical edges crossing the sheet's edges between the points they are
+  // sampled at) put the body edge through the middle of a cloth triangle whose three
+  // corners stayed outside. The triangles near an edge come from the grid at points along it
+  // 2h apart (a cloth edge within h of the body edge has its triangle's box, grown by the
+  // grid's 2h, over one of them)
+  std::vector<int> cloth_edges;
+  for (const FeatureEdge& fe : features.edges) {
+    // each triangle and cloth edge once per body edge (marked with a number distinct across
+    // body edges, bodies and calls)
+    if (edge_mark_ == std::numeric_limits<int>::max()) {
+      std::fill(triangle_seen_.begin(), triangle_seen_.end(), -1);
+      std::fill(edge_seen_.begin(), edge_seen_.end(), -1);
+      edge_mark_ = -1;
+    }
+    const int mark = ++edge_mark_;
+    const Vec3 a = pose.apply(fe.a), ab = pose.apply(fe.b) - a;
+    const Vec3 n1 = pose.rotation * fe.n1, n2 = pose.rotation * fe.n2;
+    Box3 reach(a);
+    reach.extend(Vec3(a + ab));
+    reach.min().array() -= h;
+    reach.max().array() += h;
+    const int samples = std::max(1, static_cast<int>(std::ceil(ab.norm() / (2.0 * h))));
+    cloth_edges.clear();
+    long long last = 0;
+    for (int q = 0; q <= samples; ++q) {
+      const Vec3 p = a + ab * (static_cast<double>(q) / samples);
+      if (q > 0 && grid_.cell(p) == last) continue;  // the same cell: the same triangles
+      last = grid_.cell(p);
+      grid_.query(p, near);
+      for (int t : near) {
+        if (triangle_seen_[t] == mark) continue;
+        triangle_seen_[t] = mark;
+        for (int k : triangle_edges_[t]) {
+          if (edge_seen_[k] == mark) continue;
+          edge_seen_[k] = mark;
+          cloth_edges.push_back(k);
+        }
+      }
+    }
+    for (int k : cloth_edges) {
+      const std::array<int, 2>& e = edges_[k];
+      const Vec3 c = candidate(e[0]), d = candidate(e[1]);
+      Box3 span(c);
+      span.extend(d);
+      if (!span.intersects(reach)) continue;
+      const auto [s, t] = closest_on_segments(a, a + ab, c, d);
+      if (!(s > 0.0 && s < 1.0 && t > 0.0 && t < 1.0)) continue;
+      const Vec3 xc = c + t * (d - c), across = xc - (a + s * ab);
+      const double distance = across.norm();
+      if (!(distance > 0.0)) continue;  // on the edge: no direction to go
+      Vec3 normal;
+      double phi;
+      if (across.dot(n1) > 0.0 || across.dot(n2) > 0.0) {
+        // outside: out to h along the line from the edge
+        if (!(distance < h)) continue;
+        normal = across / distance;
+        phi = distance;
+      } else if (distance < kEdgeReach * h) {
+        // inside, just past the edge (it went over the edge this step): back over it, to h
+        // on the side it came from (the opposite of an inside direction is outside, the
+        // edge being convex), rather than out of the nearest face, which can leave it
+        // across the edge still
+        normal = -across / distance;
+        phi = -distance;
+      } else {
+        // inside, deeper: out of the nearest face
+        Vec3 n_local;
+        phi = shape.phi_and_normal(pose.apply_inverse(xc), n_local);
+        if (!(phi < h)) continue;
+        normal = pose.rotation * n_local;
+      }
+      const double weights[2] = {1.0 - t, t};
+      contact(e.data(), weights, 2, xc, normal, phi);
       touched = true;
     }
   }
@@ -367,9 +463,8 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
     }
     // the body's corners and edges against the cloth's triangles
     touched |= collide_features(cloth, bodies, b, dt,
-                                [&](const int* ids, const double* w, const Vec3& xc, const Vec3& normal, double phi) {
-                                  contact_point(ids, w, 3, b, xc, normal, phi, mu);
-                                });
+                                [&](const int* ids, const double* w, int count, const Vec3& xc, const Vec3& normal,
+                                    double phi) { contact_point(ids, w, count, b, xc, normal, phi, mu); });
     if (touched && bodies.asleep(b)) bodies.wake(b);
   }
   if (const ContactGround* ground = bodies.ground()) {

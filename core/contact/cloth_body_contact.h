@@ -108,7 +108,9 @@ class ClothBodyContact {
   double surface_friction(const ContactBodies& bodies, int b) const;
   // body b's features against the cloth (spaced for its edges), made at the first call
   const BodyFeatures& body_features(const ContactBodies& bodies, int b);
-  // a body's corners and edges against the cloth's triangles: calls contact(ids, w, xc, normal, phi) per contact
+  // a body's corners and edges against the cloth's triangles, and its edges against the
+  // cloth's edges: calls contact(ids, w, count, xc, normal, phi) per contact (count 3: a
+  // triangle's vertices, 2: an edge's)
   template <class Contact>
   bool collide_features(const Cloth& cloth, const ContactBodies& bodies, int b, double dt, const Contact& contact);
 
@@ -119,6 +121,9 @@ class ClothBodyContact {
   double mean_edge_;                            // mean rest edge length (m)
   Touches touches_;
   TriangleGrid grid_;                           // scratch: the triangles at the candidate positions
+  std::vector<std::array<int, 3>> triangle_edges_;  // (ntri) each triangle's edges (indices into edges_)
+  std::vector<int> triangle_seen_, edge_seen_;  // scratch: the body edge that last looked at each (collide_features)
+  int edge_mark_ = -1;                          // the last body edge's mark
   std::vector<std::optional<BodyFeatures>> body_features_;  // (nbody) made at first use
 };
 

@@ -57,6 +57,14 @@ DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
 KNOWN_GAPS: set = set()
 
 
+MESSAGES = {
+    "strain": f"strain over the limit + {STRAIN_SLACK:.0%} of it at (cloth, frame)",
+    "inside": "cloth edges deeper than 0.5 mm in a body at (cloth, body, frame), mm",
+    "through": "box edges through cloth triangles at (cloth, body, frame)",
+    "mesh_through": "mesh body edges through cloth triangles at (cloth, body, frame)",
+}
+
+
 def mesh_edges(triangles: np.ndarray) -> np.ndarray:
     """The unique edges (i < j) of a triangle mesh."""
     e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
@@ -215,15 +223,14 @@ def test_the_check_finds_crossings():
     assert count == len(_core.intersecting_triangle_pairs(folded, triangles.astype(np.int32)))
 
 
-@pytest.mark.parametrize("name", CLOTH_SCENES)
-def test_shipped_cloth_is_render_ready(name, tmp_path):
+def render_ready_failures(scene, cache) -> tuple[dict, dict]:
+    """Every check above on a baked cache of `scene`, at every frame: the crossing triangle
+    pairs by (cloth, frame), and the other checks' failures by check name (strain, inside,
+    through, mesh_through), each a dict keyed by (cloth[, body], frame). Also run on any
+    scene by benchmarks/cloth/render_check.py."""
     from pxr import Usd, UsdGeom
 
-    scene = simbake.load_scene(REPO / "assets" / "scenes" / f"{name}.toml")
-    if FRAMES > 0:
-        scene = dataclasses.replace(scene, end_frame=min(scene.end_frame, scene.start_frame + FRAMES - 1))
-    stats = simbake.bake(scene, tmp_path / f"{name}.usdc")
-    stage = Usd.Stage.Open(str(stats.output))
+    stage = Usd.Stage.Open(str(cache))
     frames = range(scene.start_frame, scene.end_frame + 1)
     # the bodies' poses at every frame; a mesh body's triangles and edges, in its own frame,
     # as the cache writes them
@@ -277,17 +284,22 @@ def test_shipped_cloth_is_render_ready(name, tmp_path):
                 count = segments_through_mesh(segments, points, triangles)
                 if count:
                     (mesh_through if body.name in meshes else through)[(cloth.name, body.name, frame)] = count
+    return crossings, {"strain": strains, "inside": inside, "through": through, "mesh_through": mesh_through}
+
+
+@pytest.mark.parametrize("name", CLOTH_SCENES)
+def test_shipped_cloth_is_render_ready(name, tmp_path):
+    scene = simbake.load_scene(REPO / "assets" / "scenes" / f"{name}.toml")
+    if FRAMES > 0:
+        scene = dataclasses.replace(scene, end_frame=min(scene.end_frame, scene.start_frame + FRAMES - 1))
+    stats = simbake.bake(scene, tmp_path / f"{name}.usdc")
+    crossings, found = render_ready_failures(scene, stats.output)
     assert not crossings, f"crossing triangle pairs at (cloth, frame): {crossings}"
-    failed = {
-        "strain": (strains, f"strain over the limit + {STRAIN_SLACK:.0%} of it at (cloth, frame)"),
-        "inside": (inside, "cloth edges deeper than 0.5 mm in a body at (cloth, body, frame), mm"),
-        "through": (through, "box edges through cloth triangles at (cloth, body, frame)"),
-        "mesh_through": (mesh_through, "mesh body edges through cloth triangles at (cloth, body, frame)"),
-    }
-    known = [f"{message}: {found}" for check, (found, message) in failed.items()
-             if found and (name, check) in KNOWN_GAPS]
-    unexpected = [f"{check}: {message}: {found}" for check, (found, message) in failed.items()
-                  if found and (name, check) not in KNOWN_GAPS]
+    failed = {check: (found[check], message) for check, message in MESSAGES.items()}
+    known = [f"{message}: {hits}" for check, (hits, message) in failed.items()
+             if hits and (name, check) in KNOWN_GAPS]
+    unexpected = [f"{check}: {message}: {hits}" for check, (hits, message) in failed.items()
+                  if hits and (name, check) not in KNOWN_GAPS]
     assert not unexpected, "; ".join(unexpected)
     if known:
         pytest.xfail("known gap (README, limitations): " + "; ".join(known))
