@@ -15,8 +15,9 @@
 // masses. The cloth's momentum change goes, opposite, to a dynamic body at the contact point,
 // so cloth pushes bodies back. A body's corners and points along its edges (a box's, or a
 // mesh's sharp ones) are held out of the cloth's triangles the same way
-// (contact/body_features.h), so that no body edge pokes through the inside of a triangle.
-// Resting contacts against still surfaces are also held inside the cloth's implicit solve
+// (contact/body_features.h), so that no body edge pokes through the inside of a triangle,
+// and its sharp edges are held h away from the cloth's edges (collide_features). Resting
+// contacts against still surfaces are also held inside the cloth's implicit solve
 // (contact_constraints, apply_constraint_impulses), and a cloth pinched between two surfaces
 // holds them apart (hold_pinched_bodies). The world calls these in its cloth step
 // (world/cloth_stages.cpp), with strain limiting and self-collision in between.
