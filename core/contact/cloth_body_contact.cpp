@@ -24,6 +24,7 @@
 #include "contact/cloth_body_contact.h"
 
 #include "geometry/closest_points.h"
+#include "geometry/triangle_intersection.h"
 #include "rigid/impulse.h"
 
 #include <algorithm>
@@ -50,17 +51,6 @@ Vec3 surface_velocity(const ContactBodies& bodies, int b, const Vec3& p) {
 
 // the ground (b < 0), a static body or a kinematic one not moving in this step
 bool still_surface(const ContactBodies& bodies, int b) { return b < 0 || bodies.body(b).still; }
-
-// Whether segment pq crosses triangle abc: p and q on opposite sides of its plane (or one
-// on it) and the crossing point inside the triangle (edges included)
-bool segment_crosses(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 n = (b - a).cross(c - a);
-  const double dp = n.dot(p - a), dq = n.dot(q - a);
-  if ((dp > 0.0 && dq > 0.0) || (dp < 0.0 && dq < 0.0) || dp == dq) return false;
-  const Vec3 y = p + (dp / (dp - dq)) * (q - p);
-  return n.dot((b - a).cross(y - a)) >= 0.0 && n.dot((c - b).cross(y - b)) >= 0.0 &&
-         n.dot((a - c).cross(y - c)) >= 0.0;
-}
 
 // the quick reject: the body's bounding sphere, grown by h, misses the cloth's box `reach`
 bool out_of_reach(const ContactBody& body, const Box3& reach, double h) {
@@ -555,8 +545,8 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
     for (int t : crossed) {
       const int i = triangles(t, 0), j = triangles(t, 1), l = triangles(t, 2);
       if (i == k || j == k || l == k) continue;
-      count += segment_crosses(pa, pb, candidates.row(i).transpose(), candidates.row(j).transpose(),
-                               candidates.row(l).transpose());
+      count += segment_crosses_triangle(pa, pb, candidates.row(i).transpose(), candidates.row(j).transpose(),
+                                        candidates.row(l).transpose(), 0.0);
     }
     return count;
   };
@@ -564,7 +554,7 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
   std::vector<Touch> touches;
   for (int k = 0; k < n; ++k) {
     if (cloth.pinned()[k]) continue;
-    const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+    const Vec3 xc = candidates.row(k).transpose();
     touches.clear();
     for (size_t i = 0; i < near.size(); ++i) {
       const ContactBody& body = bodies.body(near[i]);

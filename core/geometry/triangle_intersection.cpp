@@ -17,15 +17,6 @@ double orient(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
   return (b - a).cross(c - a).dot(d - a);
 }
 
-// the segment pq crosses the inside of triangle abc (see the header); volumes within eps of
-// zero count as zero
-bool segment_crosses(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c, double eps) {
-  const double sp = orient(a, b, c, p), sq = orient(a, b, c, q);
-  if (!((sp < -eps && sq > eps) || (sp > eps && sq < -eps))) return false;
-  const double u = orient(p, q, a, b), v = orient(p, q, b, c), w = orient(p, q, c, a);
-  return (u > eps && v > eps && w > eps) || (u < -eps && v < -eps && w < -eps);
-}
-
 using Cell = std::array<int, 3>;
 
 // A triangle's box in cells (inclusive)
@@ -38,14 +29,21 @@ constexpr double kRoundOff = 1e-10;  // signed volumes under this x L^3 are zero
 
 }  // namespace
 
+bool segment_crosses_triangle(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c, double eps) {
+  const double sp = orient(a, b, c, p), sq = orient(a, b, c, q);
+  if (!((sp < -eps && sq > eps) || (sp > eps && sq < -eps))) return false;
+  const double u = orient(p, q, a, b), v = orient(p, q, b, c), w = orient(p, q, c, a);
+  return (u > eps && v > eps && w > eps) || (u < -eps && v < -eps && w < -eps);
+}
+
 bool triangles_intersect(const Vec3& a0, const Vec3& a1, const Vec3& a2,
                          const Vec3& b0, const Vec3& b1, const Vec3& b2) {
   const double edge = std::max({(a1 - a0).norm(), (a2 - a1).norm(), (a0 - a2).norm(), (b1 - b0).norm(),
                                 (b2 - b1).norm(), (b0 - b2).norm()});
   const double eps = kRoundOff * edge * edge * edge;
-  return segment_crosses(a0, a1, b0, b1, b2, eps) || segment_crosses(a1, a2, b0, b1, b2, eps) ||
-         segment_crosses(a2, a0, b0, b1, b2, eps) || segment_crosses(b0, b1, a0, a1, a2, eps) ||
-         segment_crosses(b1, b2, a0, a1, a2, eps) || segment_crosses(b2, b0, a0, a1, a2, eps);
+  return segment_crosses_triangle(a0, a1, b0, b1, b2, eps) || segment_crosses_triangle(a1, a2, b0, b1, b2, eps) ||
+         segment_crosses_triangle(a2, a0, b0, b1, b2, eps) || segment_crosses_triangle(b0, b1, a0, a1, a2, eps) ||
+         segment_crosses_triangle(b1, b2, a0, a1, a2, eps) || segment_crosses_triangle(b2, b0, a0, a1, a2, eps);
 }
 
 std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Points& x, const Triangles& t) {

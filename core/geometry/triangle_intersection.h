@@ -25,6 +25,10 @@
 
 namespace simbake {
 
+// Whether segment pq crosses the inside of triangle abc (the signed-volume test above),
+// volumes within eps of zero counting as zero
+bool segment_crosses_triangle(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c, double eps);
+
 // Whether triangles (a0, a1, a2) and (b0, b1, b2) cross (see above)
 bool triangles_intersect(const Vec3& a0, const Vec3& a1, const Vec3& a2,
                          const Vec3& b0, const Vec3& b1, const Vec3& b2);
