@@ -55,8 +55,9 @@
 //    The backward sweep is the forward one's adjoint, so the cycle is a symmetric positive
 //    definite operator: a valid CG preconditioner. The sweeps read the off-diagonal blocks
 //    in single precision (the products are summed in double): the cycle is bound by memory
-//    traffic, and its rounding (1e-7 relative) is far below what a preconditioner may err. Everything runs in a fixed order on one
-//    thread, so the result has the same bits at any thread count.
+//    traffic, and its rounding (1e-7 relative) is far below what a preconditioner may err.
+//    Everything runs in a fixed order on one thread, so the result has the same bits at any
+//    thread count.
 #include "cloth/multigrid.h"
 
 #include <algorithm>
