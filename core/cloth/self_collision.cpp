@@ -422,8 +422,36 @@ void vertex_items(const Items& items, int item_count, int count, int vertex_coun
 
 }  // namespace
 
-SelfCollision::SelfCollision(const Triangles& triangles, int vertex_count)
-    : triangles_(triangles), edges_(unique_edges(triangles)), vertex_count_(vertex_count) {
+namespace {
+
+// the cloth's triangles, then each obstacle's, its vertices numbered after the cloth's and
+// the obstacles' before it
+Triangles joined_triangles(const Triangles& cloth, int cloth_vertices, const std::vector<TriangleMesh>& obstacles) {
+  Eigen::Index rows = cloth.rows();
+  for (const TriangleMesh& o : obstacles) rows += o.triangles.rows();
+  Triangles all(rows, 3);
+  all.topRows(cloth.rows()) = cloth;
+  Eigen::Index row = cloth.rows();
+  int offset = cloth_vertices;
+  for (const TriangleMesh& o : obstacles) {
+    all.middleRows(row, o.triangles.rows()) = o.triangles.array() + offset;
+    row += o.triangles.rows();
+    offset += static_cast<int>(o.vertices.rows());
+  }
+  return all;
+}
+
+}  // namespace
+
+SelfCollision::SelfCollision(const Triangles& triangles, int vertex_count, const std::vector<TriangleMesh>& obstacles)
+    : triangles_(joined_triangles(triangles, vertex_count, obstacles)),
+      edges_(unique_edges(triangles_)),
+      vertex_count_(vertex_count),
+      cloth_vertices_(vertex_count) {
+  for (size_t o = 0; o < obstacles.size(); ++o) {
+    vertex_count_ += static_cast<int>(obstacles[o].vertices.rows());
+    obstacle_of_.resize(vertex_count_ - cloth_vertices_, static_cast<int>(o));
+  }
   vertex_items([&](int t, int k) { return triangles_(t, k); }, static_cast<int>(triangles_.rows()), 3, vertex_count_,
                triangle_first_, vertex_triangles_);
   vertex_items([&](int e, int k) { return edges_[e][k]; }, static_cast<int>(edges_.size()), 2, vertex_count_,
@@ -545,6 +573,16 @@ SelfCollision::Pair SelfCollision::edge_pair(int e, int f) const {
   return {{edges_[a][0], edges_[a][1], edges_[b][0], edges_[b][1]}, kUnmeasured, -1, false};
 }
 
+bool SelfCollision::point_triangle_candidate(int k, int t) const {
+  if (obstacle(k) && obstacle(triangles_(t, 0))) return false;  // an obstacle against itself
+  return !on_triangle(triangles_, t, k) && point_pivot(k, t) < 0;
+}
+
+bool SelfCollision::edge_candidate(int e, int f) const {
+  if (obstacle(edges_[e][0]) && obstacle(edges_[f][0])) return false;
+  return !share_vertex(edges_[e], edges_[f]) && edge_pivot(e, f) < 0;
+}
+
 std::vector<SelfCollision::Pair>& SelfCollision::pair_list(int list) {
   return list < 2 ? candidates_.pairs[list] : near_.pairs[list - 2];
 }
@@ -602,7 +640,7 @@ void SelfCollision::build_near() {
   m.pivot.assign(n, 0);
   std::vector<std::array<int, 2>> link;
   std::vector<char> used;
-  for (int q = 0; q < n; ++q) {
+  for (int q = 0; q < cloth_vertices_; ++q) {  // an obstacle's pairs with itself are never candidates
     link.clear();
     for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) {
       const int t = vertex_triangles_[i];
@@ -772,8 +810,13 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
                                SelfCollisionStatistics& stats) {
   Candidates& c = candidates_;
   double edge_sum = 0.0;
-  for (const auto& e : edges_) edge_sum += (row(x, e[0]) - row(x, e[1])).norm();
-  const double mean_edge = edges_.empty() ? 1.0 : edge_sum / edges_.size();
+  int cloth_edges = 0;
+  for (const auto& e : edges_) {
+    if (obstacle(e[0])) continue;  // the margin is the cloth's: an obstacle's edges may be long
+    edge_sum += (row(x, e[0]) - row(x, e[1])).norm();
+    ++cloth_edges;
+  }
+  const double mean_edge = cloth_edges == 0 ? 1.0 : edge_sum / cloth_edges;
   c.margin = kMargin * (mean_edge > 0.0 && std::isfinite(mean_edge) ? mean_edge : 1.0);
   c.pad = pad;
   const int n = vertex_count_, nt = static_cast<int>(triangles_.rows()), ne = static_cast<int>(edges_.size());
@@ -793,14 +836,12 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
   parallel_collect(n, c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = static_cast<int>(i);
     c.triangle_grid->query(c.point_boxes[k], [&](int t) {
-      if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) {
-        out.push_back(point_triangle_pair(k, t));
-      }
+      if (point_triangle_candidate(k, t)) out.push_back(point_triangle_pair(k, t));
     });
   });
   // edges against edges, each pair once
   std::vector<std::pair<int, int>> edge_pairs;
-  c.edge_grid->self_pairs(edge_pairs, [&](int e, int f) { return !share_vertex(edges_[e], edges_[f]) && edge_pivot(e, f) < 0; });
+  c.edge_grid->self_pairs(edge_pairs, [&](int e, int f) { return edge_candidate(e, f); });
   c.pairs[1].resize(edge_pairs.size());
   for (size_t p = 0; p < edge_pairs.size(); ++p) {
     const auto& [e, f] = edge_pairs[p];
@@ -879,20 +920,20 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = moved[i];
     near(*c.triangle_grid, c.stale_triangle, stale_triangles, c.stale_triangles, c.point_boxes[k], [&](int t) {
-      if (!on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle_pair(k, t));
+      if (point_triangle_candidate(k, t)) out.push_back(point_triangle_pair(k, t));
     });
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int t = triangles[i];
     near(*c.point_grid, c.stale_point, stale_points, c.stale_points, c.triangle_boxes[t], [&](int k) {
-      if (!moving[k] && !on_triangle(triangles_, t, k) && point_pivot(k, t) < 0) out.push_back(point_triangle_pair(k, t));
+      if (!moving[k] && point_triangle_candidate(k, t)) out.push_back(point_triangle_pair(k, t));
     });
   });
   // touched edges against every edge (a pair of two touched edges once)
   parallel_collect(edges.size(), c.pairs[1], [&](size_t i, std::vector<Pair>& out) {
     const int e = edges[i];
     near(*c.edge_grid, c.stale_edge, stale_edges, c.stale_edges, c.edge_boxes[e], [&](int f) {
-      if ((touched_edge[f] && f <= e) || share_vertex(edges_[e], edges_[f]) || edge_pivot(e, f) >= 0) return;
+      if ((touched_edge[f] && f <= e) || !edge_candidate(e, f)) return;
       out.push_back(edge_pair(e, f));
     });
   });
@@ -959,7 +1000,10 @@ void SelfCollision::measure(const Points& x, double h, bool all) {
       Contact c;
       p.distance = pair_contact(kind, p.vertex, x, 1e-9 * h, c);
       p.exact = true;
-      if (c.distance < h && c.normal.squaredNorm() > 0.0) found.push_back(c);
+      // the cloth's contacts with its obstacles keep it at h from them (contact/), with
+      // their friction: only a pair of the cloth's own is repelled
+      const bool own = !(obstacle(p.vertex[0]) || obstacle(p.vertex[1]) || obstacle(p.vertex[2]) || obstacle(p.vertex[3]));
+      if (own && c.distance < h && c.normal.squaredNorm() > 0.0) found.push_back(c);
     });
   }
   // closest first (the order does not depend on how the pairs were found)
@@ -1138,17 +1182,35 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
 namespace {
 
 // A zone's vertices given one rigid motion, that of the zone's momentum and angular momentum
-// about its centre of mass, with `impulse` (n x 3, N s, if any) added to its vertices' own; a
-// zone holding a pinned vertex stays still
+// about its centre of mass, with `impulse` (n x 3, N s, if any) added to its vertices' own. A
+// zone holding vertices of infinite mass moves as they do: those of one obstacle (obstacle_of
+// >= 0) give the zone that obstacle's motion (motions[obstacle]), which carries the zone and
+// the obstacle by one invertible affine map, so that nothing in the zone passes through the
+// obstacle; a pinned cloth vertex, or two obstacles, hold the zone still. Vertices of
+// infinite mass keep their own velocities.
 void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
-                  const Points* impulse) {
+                  const Points* impulse, const std::vector<int>& obstacle_of, int cloth_vertices,
+                  const std::vector<ObstacleMotion>* motions) {
+  int held_by = -1;       // the obstacle the zone holds, if one
+  bool still = false;     // a pinned vertex, or two obstacles
+  for (int i : zone) {
+    if (inverse_mass[i] > 0.0) continue;
+    const int o = i >= cloth_vertices && motions ? obstacle_of[i - cloth_vertices] : -1;
+    if (o < 0 || (held_by >= 0 && held_by != o)) still = true;
+    held_by = o;
+  }
+  if (still || held_by >= 0) {
+    const ObstacleMotion* motion = still ? nullptr : &(*motions)[held_by];
+    for (int i : zone) {
+      if (inverse_mass[i] <= 0.0) continue;
+      const Vec3 velocity = motion ? Vec3(motion->A * row(x, i) + motion->c) : Vec3::Zero();
+      v.row(i) = velocity.transpose();
+    }
+    return;
+  }
   double mass = 0.0;
   Vec3 center = Vec3::Zero(), momentum = Vec3::Zero();
   for (int i : zone) {
-    if (inverse_mass[i] <= 0.0) {
-      for (int k : zone) v.row(k).setZero();
-      return;
-    }
     const double m = 1.0 / inverse_mass[i];
     mass += m;
     center += m * row(x, i);
@@ -1185,9 +1247,9 @@ std::vector<std::vector<int>> SelfCollision::zone_members() const {
 }
 
 void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
-                               const Points& impulse) const {
+                               const SelfCollisionSettings& settings, const Points& impulse) const {
   for (const std::vector<int>& zone : zone_members()) {
-    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse);
+    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion);
   }
 }
 
@@ -1232,15 +1294,16 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     for (const std::vector<int>& zone : zone_members()) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
-      move_rigidly(zone, x, v, inverse_mass, nullptr);
+      move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_, settings.obstacle_motion);
     }
   }
-  // the last resort: nothing moves, and a cloth free of crossings stays free of them
+  // the last resort: the cloth does not move, and a cloth free of crossings stays free of them
+  // (unless a moving obstacle runs into it: obstacles move as they must)
   collision_contacts(x, v, dt, settings, contacts, stats);
   outside_zones(contacts);
   if (contacts.empty()) return;
   ++stats.stills;
-  v.setZero();
+  v.topRows(cloth_vertices_).setZero();
 }
 
 }  // namespace simbake

@@ -61,8 +61,23 @@
 // 137 near pairs a step were candidates on average (0.002 a vertex; 0.007 at 129 x 129),
 // and self-collision took 114 CPU s instead of 154 (benchmarks/cloth/run_simbake.py 257).
 // SelfCollision.NearPairsOfAFlatPivotNeverMeet checks the argument by brute force.
+//
+// Obstacles. Bodies the cloth must not pass through (a box's edge, a pole, a keyed mover) can
+// join as obstacles: their triangles are added to the cloth's, their vertices numbered after
+// the cloth's, of infinite mass (inverse mass 0, so impulses move only the cloth's side) and
+// moving with the obstacle over the step (x + s dt v: the caller gives each vertex its start
+// and its velocity to its end). A pair of a cloth point and an obstacle triangle, an
+// obstacle point and a cloth triangle, or a cloth edge and an obstacle edge is then a
+// candidate like the cloth's own pairs, so that the continuous test and the impact zones
+// keep the cloth from passing through an obstacle, and an obstacle's corner or edge from
+// passing through the cloth, over the step (Bridson et al. treat bodies as such infinite-mass
+// members of their collision handling). Pairs within one obstacle are never candidates, and
+// pairs with an obstacle are not repelled: the cloth's contacts with the bodies hold it at
+// the thickness from them, with their friction. An impact zone holding an obstacle's
+// vertices moves with that obstacle (ObstacleMotion).
 #pragma once
 
+#include "geometry/mesh.h"
 #include "math/types.h"
 
 #include <Eigen/Core>
@@ -72,6 +87,15 @@
 #include <vector>
 
 namespace simbake {
+
+// An obstacle's motion over the step as a velocity field: a point at x at the step's start
+// moves at A x + c (m/s), on a line to where the obstacle's end pose takes it. For an
+// obstacle posed by (R0, t0) at the start and (R1, t1) at the end, with R = R1 R0^T:
+// A = (R - I) / dt and c = (t1 - R t0) / dt
+struct ObstacleMotion {
+  Mat3 A = Mat3::Zero();
+  Vec3 c = Vec3::Zero();
+};
 
 struct SelfCollisionSettings {
   double thickness = 0.005;   // h (m): pairs closer than this are pushed apart
@@ -89,6 +113,9 @@ struct SelfCollisionSettings {
   // zones; with them held too the heap's landing ended a step at 10.16% strain (the
   // limiter and the collisions did not agree within the final rounds), at 10.06% without
   const std::vector<Vec3>* support = nullptr;
+  // (obstacles) or null: each obstacle's motion over the step (the impact zones that hold an
+  // obstacle's vertices move with it; without it, they hold still)
+  const std::vector<ObstacleMotion>* obstacle_motion = nullptr;
 };
 
 struct SelfCollisionStatistics {
@@ -106,7 +133,11 @@ struct SelfCollisionStatistics {
 
 class SelfCollision {
  public:
-  SelfCollision(const Triangles& triangles, int vertex_count);
+  // the cloth's triangles and vertex count, and the obstacles' meshes (their triangles; their
+  // vertex counts, the positions being the caller's at each call). Every call's x, v and
+  // inverse_mass then hold the cloth's vertices and, after them, each obstacle's in turn;
+  // the obstacles' inverse masses are 0
+  SelfCollision(const Triangles& triangles, int vertex_count, const std::vector<TriangleMesh>& obstacles = {});
   ~SelfCollision();
   SelfCollision(SelfCollision&&) noexcept;
   SelfCollision& operator=(SelfCollision&&) noexcept;
@@ -125,12 +156,15 @@ class SelfCollision {
   // 3. rigid impact zones until nothing collides (or, at last, the cloth held still)
   void impact_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                     const SelfCollisionSettings& settings, SelfCollisionStatistics& stats);
+  // the vertices of the cloth and of the obstacles
+  int vertex_count() const { return vertex_count_; }
   // (n) 1 for the vertices the last impact_zones moved rigidly
   const std::vector<char>& zone_vertices() const { return in_zone_; }
   // impulses (n x 3, N s) on the vertices of the last impact zones, each zone taking those on
   // its vertices as one rigid body (its momentum and angular momentum gain them; a zone holding
   // a pinned vertex stays still). For what the strain limiter pushed against zones it held still.
-  void push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, const Points& impulse) const;
+  void push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
+                  const SelfCollisionSettings& settings, const Points& impulse) const;
 
   // A contact of the continuous detection: a point against a triangle (vertices a = the point,
   // then the triangle's) or an edge against an edge (a0 a1, then b0 b1), at a time in [0, 1]
@@ -215,10 +249,17 @@ class SelfCollision {
   std::vector<int> zone_parent_;  // (n) the last impact zones: union-find parents (a root is its own)
   Triangles triangles_;
   std::vector<std::array<int, 2>> edges_;
-  int vertex_count_;
+  int vertex_count_;    // the cloth's and the obstacles'
+  int cloth_vertices_;  // the cloth's: vertices [0, cloth_vertices_)
+  std::vector<int> obstacle_of_;  // (obstacle vertices) the obstacle each belongs to
   // each vertex's triangles and edges: those of vertex k at [first[k], first[k + 1])
   std::vector<int> triangle_first_, vertex_triangles_, edge_first_, vertex_edges_;
 
+  bool obstacle(int k) const { return k >= cloth_vertices_; }
+  // whether point k and triangle t, or edges e and f, are candidates when their boxes meet:
+  // not neighbours, not a near pair, not both of the obstacles
+  bool point_triangle_candidate(int k, int t) const;
+  bool edge_candidate(int e, int f) const;
   Pair point_triangle_pair(int k, int t) const;  // point k against triangle t, not yet measured
   Pair edge_pair(int e, int f) const;             // edges e and f (the lower index first), not yet measured
   // the candidate lists: 0, 1 the broad phase's (points against triangles, edges against

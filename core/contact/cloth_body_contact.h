@@ -32,6 +32,8 @@ struct ContactBody {
   const TriangleMesh* mesh = nullptr;     // the closed mesh of a level-set body (its sharp
                                           // edges are features), or null or empty
   Pose pose;                              // mesh coordinates to world
+  Pose start_pose;                        // the same at the start of the cloth's step (for a
+                                          // cloth stepped over several body substeps, before the first)
   Vec3 center = Vec3::Zero();             // centre of mass, world (m)
   double bounding_radius = 0.0;           // about the centre of mass (m)
   double friction = 0.5;                  // Coulomb coefficient

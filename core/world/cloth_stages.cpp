@@ -5,7 +5,8 @@
 // the bodies and the ground (contact/cloth_body_contact.h: the candidates x + dt v pushed out
 // to the cloth's thickness, Coulomb friction, the opposite momentum to dynamic bodies) then
 // alternate with strain limiting and self-collision (see step_cloths), then strain limiting
-// and self-collision in rounds, then a cloth pinched between two surfaces holds them apart,
+// and self-collision in rounds (self-collision with the kinematic boxes and meshes as
+// obstacles of infinite mass: contact/cloth_obstacles.h), then a cloth pinched between two surfaces holds them apart,
 // then positions. The contacts see the bodies through ContactBodies, which World implements
 // here over its own arrays (ClothContactBodies).
 #include "world/world.h"
@@ -33,6 +34,7 @@ int World::add_cloth(const ClothDesc& desc, double friction, double thickness, b
   const Cloth& cloth = cloths_.emplace_back(desc);
   cloth_contacts_.emplace_back(cloth, friction, thickness);
   cloth_self_.emplace_back();
+  cloth_obstacles_.emplace_back();
   if (self_collision) cloth_self_.back().emplace(cloth.triangles(), cloth.vertex_count());
   return cloth_count() - 1;
 }
@@ -51,6 +53,7 @@ class World::ClothContactBodies final : public ContactBodies {
       body.shape = def.shape.get();
       body.mesh = &world.body_meshes_[b];
       body.pose = mesh_pose(def, world.states_[b]);
+      body.start_pose = b < static_cast<int>(world.cloth_step_poses_.size()) ? world.cloth_step_poses_[b] : body.pose;
       body.center = world.states_[b].x;
       body.bounding_radius = def.bounding_radius;
       body.friction = def.friction;
@@ -87,6 +90,12 @@ class World::ClothContactBodies final : public ContactBodies {
   std::optional<ContactGround> ground_;
 };
 
+void World::begin_cloth_step() {
+  if (cloths_.empty()) return;
+  cloth_step_poses_.resize(defs_.size());
+  for (int b = 0; b < body_count(); ++b) cloth_step_poses_[b] = mesh_pose(defs_[b], states_[b]);
+}
+
 void World::step_cloths(double dt) {
   if (!cloths_.empty()) ++stats_.cloth_steps;
   for (int c = 0; c < cloth_count(); ++c) {
@@ -110,14 +119,36 @@ void World::step_cloths(double dt) {
       ScopedTimer timer(profile_.cloth_strain);
       cloth.limit_strain(dt, global);
     };
-    const auto repel = [&] {
+    // the kinematic boxes and meshes join self-collision as obstacles (contact/cloth_obstacles.h):
+    // its calls then see the cloth's vertices and the obstacles' in one set of arrays
+    ClothObstacles& obstacles = cloth_obstacles_[c];
+    if (self && obstacles.select(bodies)) self.emplace(cloth.triangles(), cloth.vertex_count(), obstacles.meshes());
+    const bool joined = self && !obstacles.empty();
+    if (joined) {
+      obstacles.begin_step(cloth, bodies, inverse_mass, dt);
+      self_settings.obstacle_motion = &obstacles.motions();
+    }
+    // f(x, v, inverse mass, settings) on the cloth's arrays, or on those joined with the obstacles'
+    const auto on_self = [&](auto&& f) {
       ScopedTimer timer(profile_.cloth_self_collision);
-      self->repel(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings, stats_.self_collision);
+      if (!joined) return f(cloth.positions(), cloth.velocities(), inverse_mass, self_settings);
+      obstacles.load(cloth.velocities(), contact.support());
+      SelfCollisionSettings settings = self_settings;
+      settings.support = &obstacles.support();
+      const bool result = f(obstacles.positions(), obstacles.velocities(), obstacles.inverse_mass(), settings);
+      obstacles.store(cloth.velocities());
+      return result;
+    };
+    const auto repel = [&] {
+      on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+        self->repel(x, v, w, dt, settings, stats_.self_collision);
+        return true;
+      });
     };
     const auto collide_self = [&](int passes) {
-      ScopedTimer timer(profile_.cloth_self_collision);
-      return self->collide(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
-                           stats_.self_collision, passes);
+      return on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+        return self->collide(x, v, w, dt, settings, stats_.self_collision, passes);
+      });
     };
     {
       // the contacts the solve holds, and their friction after it, are contacts' time
@@ -179,19 +210,25 @@ void World::step_cloths(double dt) {
       // with the zones held still (only the vertices around them move), and what that brings
       // into collision joins a zone in turn; the zones have the last word
       for (int round = 0; round < kZoneRounds && !clear; ++round) {
-        {
-          ScopedTimer timer(profile_.cloth_self_collision);
-          self->impact_zones(cloth.positions(), cloth.velocities(), inverse_mass, dt, self_settings,
-                             stats_.self_collision);
-        }
+        on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+          self->impact_zones(x, v, w, dt, settings, stats_.self_collision);
+          return true;
+        });
         if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kFinalSlack)) break;
         if (round + 1 == kZoneRounds) break;
         {
           // the zones take the pushes of the edges around them as rigid bodies, so that
           // momentum is kept (held still, they would absorb them)
-          ScopedTimer timer(profile_.cloth_strain);
-          const Points pushed = cloth.limit_strain_holding(dt, self->zone_vertices());
-          self->push_zones(cloth.positions(), cloth.velocities(), inverse_mass, pushed);
+          Points pushed;
+          {
+            ScopedTimer timer(profile_.cloth_strain);
+            const std::vector<char>& zones = self->zone_vertices();
+            pushed = cloth.limit_strain_holding(dt, joined ? obstacles.cloth_part(zones) : zones);
+          }
+          on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+            self->push_zones(x, v, w, settings, joined ? obstacles.padded(pushed) : pushed);
+            return true;
+          });
         }
         clear = collide_self(1);
       }

@@ -276,6 +276,7 @@ int World::step_frame(double frame_dt, int substeps) {
   tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
   arena.execute([&] {
     for (int k = 0; k < n && stats_.finite; ++k) {
+      if (k % group == 0) begin_cloth_step();
       step_bodies(dt);
       if ((k + 1) % group == 0) {
         ScopedTimer timer(profile_.cloths);
@@ -293,6 +294,7 @@ int World::step_frame(double frame_dt, int substeps) {
 }
 
 void World::step(double dt) {
+  begin_cloth_step();
   step_bodies(dt);
   ScopedTimer timer(profile_.cloths);
   step_cloths(dt);

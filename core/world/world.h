@@ -27,6 +27,7 @@
 #include "cloth/cloth.h"
 #include "cloth/self_collision.h"
 #include "contact/cloth_body_contact.h"
+#include "contact/cloth_obstacles.h"
 #include "geometry/mass_properties.h"
 #include "geometry/mesh.h"
 #include "rigid/box_contact.h"
@@ -237,6 +238,7 @@ class World {
   void move_kinematic_bodies(double dt);
   void broad_phase(double dt);
   void update_sleeping(double dt);
+  void begin_cloth_step();  // records the bodies' poses the cloths' step starts from
   void step_cloths(double dt);
   void resolve_collisions(double dt);
   void update_velocities(double dt);
@@ -318,6 +320,8 @@ class World {
                                                           // thickness (m, kept from surfaces and itself),
                                                           // inverse masses, edges, and their state and scratch
   std::vector<std::optional<SelfCollision>> cloth_self_;  // (ncloth) self-collision, when on
+  std::vector<ClothObstacles> cloth_obstacles_;           // (ncloth) the bodies its self-collision keeps it from
+  std::vector<Pose> cloth_step_poses_;      // (nbody) each body's mesh pose at the start of the cloths' step
   std::vector<TriangleMesh> body_meshes_;   // (nbody) the mesh of a level-set body (BodyDesc), else empty
   std::vector<ContactBody> contact_bodies_;  // (nbody) scratch: the bodies as the cloth contacts see them
   std::vector<BodyPair> pairs_;             // pairs the broad phase kept this step
