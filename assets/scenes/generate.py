@@ -191,10 +191,22 @@ def towel_on_rod() -> str:
     return text
 
 
+def box_plow() -> str:
+    text = header("A box pushed along the ground into a sheet lying on it, a vertical edge first: the sheet "
+                  "rucks up and folds against it.", 73)
+    turn = (math.cos(math.pi / 8), 0.0, math.sin(math.pi / 8), 0.0)  # 45 degrees about y
+    keys = (f"[{{ time = 0.0 }}, {{ time = 0.5 }}, {{ time = 2.5, position = [0.3, 0.2, 0.0], "
+            f"orientation = {vec(turn)} }}]")
+    text += (body("plow", box((0.4, 0.4, 0.4)), (-0.9, 0.2, 0), orientation=turn, kinematic=True, friction=0.5)
+             .rstrip("\n") + f"\nkeys = {keys}\n")
+    text += cloth("sheet", (1, 1), (20, 20), (0, 0.02, 0), friction=0.5)
+    return text
+
+
 def main() -> None:
     for name, make in [("heap", heap), ("towel_on_rod", towel_on_rod), ("tower", tower), ("pyramid", pyramid), ("dominoes", dominoes), ("pile", pile),
                        ("ring_toss", ring_toss), ("drape", drape), ("flag", flag), ("tablecloth", tablecloth),
-                       ("cape_on_mover", cape_on_mover), ("cloth_demo", cloth_demo)]:
+                       ("cape_on_mover", cape_on_mover), ("cloth_demo", cloth_demo), ("box_plow", box_plow)]:
         (HERE / f"{name}.toml").write_text(make())
 
 

@@ -5,8 +5,7 @@ deeper than 0.5 mm in a body, and body edges through the cloth (boxes and mesh b
     .venv/bin/python benchmarks/cloth/render_check.py SCENE.toml [-o CACHE.usdc]
 
 Prints each failing frame's figures and exits 1 if any frame fails. The shipped cloth scenes
-pass over their whole length; benchmarks/cloth/box_plow.toml (a box pushed along the ground
-into a sheet lying on it) is the known case that does not (README, limitations).
+pass over their whole length (the test bakes those; this is for any other scene).
 """
 
 from __future__ import annotations

@@ -47,7 +47,7 @@ from simbake.scene import Shape
 sys.path.insert(0, str(REPO / "benchmarks" / "cloth"))
 from crossings import crossing_count, segments_through  # noqa: E402
 
-CLOTH_SCENES = ["drape", "flag", "tablecloth", "cape_on_mover", "cloth_demo", "heap", "towel_on_rod"]
+CLOTH_SCENES = ["drape", "flag", "tablecloth", "cape_on_mover", "cloth_demo", "heap", "towel_on_rod", "box_plow"]
 FRAMES = int(os.environ.get("SIMBAKE_RENDER_READY_FRAMES", "0"))  # 0: every frame of the scene
 STRAIN_SLACK = 0.01      # of the strain limit (the QA's warning threshold)
 DEEPEST_INSIDE = 0.5e-3  # (m) a cloth edge's sample past a body's surface
