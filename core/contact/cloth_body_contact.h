@@ -82,6 +82,7 @@ class ClothBodyContact {
 
   double friction() const { return friction_; }
   double thickness() const { return thickness_; }
+  double mean_edge() const { return mean_edge_; }  // the cloth's mean rest edge length (m)
   const Eigen::VectorXd& inverse_mass() const { return inverse_mass_; }
   const std::vector<std::array<int, 2>>& edges() const { return edges_; }
   // (nvert) for each vertex, the sum of the normals of the still surfaces (the ground, static

@@ -196,6 +196,7 @@ World::FrameSchedule World::frame_schedule(double frame_dt) const {
   Box3 reach;                  // the cloths now
   double fastest = 0.0;        // their fastest vertex (m/s)
   double reach_speed = 0.0;    // ... or their thickness over the frame, whichever is more
+  double shortest_edge = std::numeric_limits<double>::infinity();  // the least of their mean edges (m)
   for (size_t c = 0; c < cloths_.size(); ++c) {
     const Cloth& cloth = cloths_[c];
     if (cloth.integrator() == ClothIntegrator::kExplicit) {
@@ -206,11 +207,20 @@ World::FrameSchedule World::frame_schedule(double frame_dt) const {
       fastest = std::max(fastest, cloth.velocities().row(k).norm());
     }
     reach_speed = std::max({reach_speed, fastest, cloth_contacts_[c].thickness() / frame_dt});
+    shortest_edge = std::min(shortest_edge, cloth_contacts_[c].mean_edge());
   }
   const double gravity_speed = settings_.gravity.norm() * frame_dt;  // what gravity adds in a frame
   if (body_count() > 0) {
     steps = std::max(steps, std::ceil((fastest + gravity_speed) * frame_dt / (settings_.travel_fraction * thinnest)));
   }
+  // a keyed or moving kinematic body near a cloth travels at most one of its edges in a cloth
+  // step: its contacts (and, a box or a mesh, self-collision's impact zones) carry the
+  // vertices it meets along with it, and the strain limiter moves an edge's ends by at most a
+  // tenth of an edge a pass (cloth.cpp), so that a body moving much farther in a step drags
+  // the edges around it past the limit (the stress run's cape on a box spinning at 30 rad/s,
+  // 0.11 m a step at 5 steps a frame against 0.044 m edges: 254% at a frame's end)
+  const double collider = kinematic_speed_near(reach, reach_speed, frame_dt);
+  if (collider > 0.0 && shortest_edge > 0.0) steps = std::max(steps, std::ceil(collider * frame_dt / shortest_edge));
   if (dynamic_body_near(reach, reach_speed + gravity_speed, frame_dt)) {
     steps = std::max({steps, rigid, std::ceil(frame_dt / settings_.cloth_contact_substep)});
   }
@@ -239,6 +249,32 @@ double World::thinnest_body() const {
   return thinnest;
 }
 
+double World::body_speed(int i, double frame_dt) const {
+  const RigidBodyDef& def = defs_[i];
+  double speed = states_[i].v.norm() + body_angular_velocity(i).norm() * def.bounding_radius;
+  if (!tracks_[i].empty()) {  // a keyed body: how far its track takes it over the frame
+    Vec3 o0, o1;
+    Quat q0, q1;
+    tracks_[i].pose_at(time_, o0, q0);
+    tracks_[i].pose_at(time_ + frame_dt, o1, q1);
+    speed = std::max(speed, ((o1 - o0).norm() + q1.angularDistance(q0) * (def.bounding_radius + def.center.norm())) / frame_dt);
+  }
+  if (!def.kinematic) speed += settings_.gravity.norm() * frame_dt;
+  return speed;
+}
+
+double World::kinematic_speed_near(const Box3& reach, double reach_speed, double frame_dt) const {
+  double fastest = 0.0;
+  for (int i = 0; i < body_count(); ++i) {
+    if (!defs_[i].kinematic || !(moving_kinematic(i) || !tracks_[i].empty())) continue;
+    const double speed = body_speed(i, frame_dt);
+    const double radius = defs_[i].bounding_radius + (speed + reach_speed) * frame_dt;
+    const Vec3 nearest = states_[i].x.cwiseMax(reach.min()).cwiseMin(reach.max());
+    if ((nearest - states_[i].x).norm() <= radius) fastest = std::max(fastest, speed);
+  }
+  return fastest;
+}
+
 double World::body_travel_steps(double frame_dt, double thinnest) const {
   // Each body may travel a fraction of its thickness per substep (no tunnelling through its
   // own thinnest part), nor more than twice that fraction of the scene's thinnest body (no
@@ -248,16 +284,7 @@ double World::body_travel_steps(double frame_dt, double thinnest) const {
   for (int i = 0; i < body_count(); ++i) {
     if (asleep_[i]) continue;
     const RigidBodyDef& def = defs_[i];
-    const Vec3 omega = body_angular_velocity(i);
-    double speed = states_[i].v.norm() + omega.norm() * def.bounding_radius;
-    if (!tracks_[i].empty()) {  // a keyed body: how far its track takes it over the frame
-      Vec3 o0, o1;
-      Quat q0, q1;
-      tracks_[i].pose_at(time_, o0, q0);
-      tracks_[i].pose_at(time_ + frame_dt, o1, q1);
-      speed = std::max(speed, ((o1 - o0).norm() + q1.angularDistance(q0) * (def.bounding_radius + def.center.norm())) / frame_dt);
-    }
-    if (!def.kinematic) speed += settings_.gravity.norm() * frame_dt;
+    const double speed = body_speed(i, frame_dt);
     const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
     steps = std::max(steps, std::ceil(speed * frame_dt / limit));
   }

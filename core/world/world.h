@@ -232,6 +232,12 @@ class World {
   FrameSchedule frame_schedule(double frame_dt) const;
   double thinnest_body() const;                                      // (m), infinite with no body
   double body_travel_steps(double frame_dt, double thinnest) const;  // steps that keep each body's travel short
+  // the speed (m/s) of body i's fastest point over the next frame: its velocities now or, for a
+  // keyed body, its track's travel over the frame; gravity's gain over the frame for a dynamic body
+  double body_speed(int i, double frame_dt) const;
+  // the fastest moving kinematic body whose bounding sphere may meet the cloths' box within
+  // the frame (m/s), 0 if none
+  double kinematic_speed_near(const Box3& reach, double reach_speed, double frame_dt) const;
   // whether an awake dynamic body may touch the cloths' box `reach` within the frame
   bool dynamic_body_near(const Box3& reach, double reach_speed, double frame_dt) const;
   // stages
