@@ -950,10 +950,11 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
   Candidates& c = candidates_;
   const bool new_step = !(s.x.rows() == x.rows() && s.x == x);
   if (new_step) {
-    // the frame moves on, by the median motion over this step of (at most about 1,000 of) the vertices
+    // the frame moves on, by the median motion over this step of (at most about 1,000 of) the
+    // cloth's vertices (an obstacle's, a static table's say, may outnumber them)
     c.frame += c.frame_step;
-    const Eigen::Index stride = std::max<Eigen::Index>(1, x.rows() / 1024);
-    std::vector<double> motion((x.rows() + stride - 1) / stride);
+    const Eigen::Index stride = std::max<Eigen::Index>(1, cloth_vertices_ / 1024);
+    std::vector<double> motion((cloth_vertices_ + stride - 1) / stride);
     for (int a = 0; a < 3 && !motion.empty(); ++a) {
       for (size_t i = 0; i < motion.size(); ++i) motion[i] = dt * v(static_cast<Eigen::Index>(i) * stride, a);
       std::nth_element(motion.begin(), motion.begin() + motion.size() / 2, motion.end());
