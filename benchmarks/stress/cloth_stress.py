@@ -14,7 +14,11 @@ something breaks, and record where.
               (r 0.15 m) crossing it at 1 ... 100 m/s, and a draped cape (as
               assets/scenes/cape_on_mover) on a keyed box spinning at 1 ... 30 rad/s. Pass:
               finite, no vertex inside the collider past its surface at any frame end (1 mm),
-              strain <= 11 % (the curtain) / finite (the cape).
+              strain <= 11 % (the curtain) / finite (the cape). And a box (0.4 m, a vertical
+              edge first, as assets/scenes/box_plow) keyed along the ground through a 1 m sheet
+              (21 x 21) lying on it at 0.6 ... 30 m/s. Pass: finite, strain <= 11 %, no cloth
+              vertex inside the box past its surface (1 mm), and no edge of the box through a
+              cloth triangle at any frame end (crossings.py's segment test, NumPy).
 - triangles   a 1 m sheet (17 x 17) draped on the sphere with sliver triangles (one vertex of
               a row pushed to within 1e-3 ... 1e-9 m of its neighbours' line), with tiny
               triangles (a corner refined to 1e-3 ... 1e-5 m edges), and with a zero-area
@@ -48,7 +52,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(ROOT / "benchmarks" / "cloth"))
 import drape_spec as spec  # noqa: E402
-from crossings import crossing_count  # noqa: E402
+from crossings import crossing_count, segments_through  # noqa: E402
 
 FPS = 24
 TIMEOUT = 120.0
@@ -192,6 +196,51 @@ def case_spinner(spin: float) -> dict:
     return judge(run_frames(w, 48, t), strain=False)
 
 
+def box_edges_through(world, box: int, size, points, triangles) -> int:
+    """(box edge, cloth triangle) pairs that cross, the box's 12 edges at its pose now."""
+    translations, orientations = world.mesh_poses()
+    w, x, y, z = orientations[box]
+    rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    corners = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)]) * 0.5 * np.asarray(size)
+    corners = corners @ rotation.T + translations[box]
+    pairs = [(i, j) for i in range(8) for j in range(i + 1, 8) if bin(i ^ j).count("1") == 1]
+    B = points[triangles]
+    count = 0
+    for i, j in pairs:
+        p, q = np.tile(corners[i], (len(B), 1)), np.tile(corners[j], (len(B), 1))
+        count += int(segments_through(p, q, B, np.full(len(B), np.linalg.norm(corners[j] - corners[i]))).sum())
+    return count
+
+
+def case_plow(speed: float) -> dict:
+    from simbake import _core
+    w = _core.World()
+    w.set_ground(0.0, 0.5, 0.0)
+    size = np.array([0.4, 0.4, 0.4])
+    turn = [math.cos(math.pi / 8), 0.0, math.sin(math.pi / 8), 0.0]  # 45 degrees about y: an edge first
+    box = w.add_body(_core.LevelSet.box(size), _core.box_mesh(size, 3)[0], _core.box_mass_properties(size), 1.0,
+                     np.array([-0.9, 0.2, 0.0]), np.array(turn), friction=0.5, kinematic=True)
+    duration = 1.8 / speed
+    w.set_kinematic_track(box, [0.0, duration], np.array([[-0.9, 0.2, 0.0], [0.9, 0.2, 0.0]]), np.array([turn, turn]))
+    v, t = grid(21, 1.0, 0.02)
+    w.add_cloth(v, t, friction=0.5)
+    through = [0, None]
+
+    def edges(world):
+        count = box_edges_through(world, box, size, world.cloth_state(0)[0], t)
+        if count > through[0]:
+            through[0] = count
+            through[1] = world.time
+    out = judge(run_frames(w, int(math.ceil(duration * FPS)) + 12, t, edges))
+    out["box_edges_through"] = through[0]
+    if through[0]:
+        out["passed"] = False
+        out["failure"] = "; ".join(filter(None, [out["failure"], f"{through[0]} box edge crossings (t {through[1]:.2f} s)"]))
+    return out
+
+
 def sheet(n: int = 17):
     v, t = grid(n, 1.0, 1.2)
     return v, t
@@ -245,7 +294,8 @@ AXES = {
               ("cloth step 1/24 s (one a frame)", case_steps, (1 / 24, 0)),
               ("1 substep a frame, everything", case_steps, (1 / 120, 1))],
     "colliders": [(f"sphere through a curtain at {s:g} m/s", case_curtain, (s,)) for s in (1, 5, 20, 100)]
-                 + [(f"cape on a box spinning at {s:g} rad/s", case_spinner, (s,)) for s in (1, 5, 10, 30)],
+                 + [(f"cape on a box spinning at {s:g} rad/s", case_spinner, (s,)) for s in (1, 5, 10, 30)]
+                 + [(f"box ploughing a sheet at {s:g} m/s", case_plow, (s,)) for s in (0.6, 3, 10, 15, 30)],
     "triangles": [(f"sliver, vertex {d:g} m off the line", case_triangles, ("sliver", d)) for d in (1e-3, 1e-6, 1e-9)]
                  + [(f"tiny triangles, {d:g} m edges", case_triangles, ("tiny", d)) for d in (1e-3, 1e-4, 1e-5)]
                  + [("zero-area triangle", case_triangles, ("zero", 0.0))],

@@ -21,6 +21,8 @@ namespace simbake {
 
 namespace {
 
+constexpr double kColliderTravel = 0.5;  // of a cloth's mean edge: the most a kinematic body near it moves in a cloth step
+
 void require(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument(what);
 }
@@ -213,14 +215,19 @@ World::FrameSchedule World::frame_schedule(double frame_dt) const {
   if (body_count() > 0) {
     steps = std::max(steps, std::ceil((fastest + gravity_speed) * frame_dt / (settings_.travel_fraction * thinnest)));
   }
-  // a keyed or moving kinematic body near a cloth travels at most one of its edges in a cloth
-  // step: its contacts (and, a box or a mesh, self-collision's impact zones) carry the
-  // vertices it meets along with it, and the strain limiter moves an edge's ends by at most a
-  // tenth of an edge a pass (cloth.cpp), so that a body moving much farther in a step drags
-  // the edges around it past the limit (the stress run's cape on a box spinning at 30 rad/s,
-  // 0.11 m a step at 5 steps a frame against 0.044 m edges: 254% at a frame's end)
+  // a keyed or moving kinematic body near a cloth travels at most half of its mean edge in a
+  // cloth step: its contacts (and, a box or a mesh, self-collision's impact zones) carry the
+  // vertices it meets along with it, so that an edge from a vertex it carries to one it has not
+  // reached yet shrinks by what it travels, and the strain limiter moves an edge's ends by at
+  // most a tenth of an edge a pass (cloth.cpp). Farther, the edges around it were dragged
+  // past the limit (the stress run's cape on a box spinning at 30 rad/s, 0.11 m a step at 5
+  // steps a frame against 0.044 m edges: 254% at a frame's end), and at a whole edge a step
+  // the sheet a box ploughs at 10 m/s was squashed flat in its plane, its triangles turned
+  // over onto each other, and then crossed
   const double collider = kinematic_speed_near(reach, reach_speed, frame_dt);
-  if (collider > 0.0 && shortest_edge > 0.0) steps = std::max(steps, std::ceil(collider * frame_dt / shortest_edge));
+  if (collider > 0.0 && shortest_edge > 0.0) {
+    steps = std::max(steps, std::ceil(collider * frame_dt / (kColliderTravel * shortest_edge)));
+  }
   if (dynamic_body_near(reach, reach_speed + gravity_speed, frame_dt)) {
     steps = std::max({steps, rigid, std::ceil(frame_dt / settings_.cloth_contact_substep)});
   }
