@@ -23,9 +23,11 @@ SOURCES := $(shell find core bindings -name '*.cpp' -o -name '*.h') $(wildcard t
 demo: install
 	$(VENV)/bin/simbake demo
 
+# the Python tests on every CPU (pytest-xdist; the longest, a shipped cloth scene baked and
+# checked at every frame, takes a few minutes alone)
 test: install
 	$(VENV)/bin/ctest --test-dir $(BUILD) --output-on-failure --timeout 300 -j2
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto --durations=10
 
 bench: install
 	$(PY) -m pip install -q "matplotlib>=3.7"

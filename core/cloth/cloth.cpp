@@ -162,12 +162,13 @@ constexpr double kStrainTolerance = 1e-6;   // strain limiting is done when ever
 constexpr double kMaxCorrection = 0.1;
 constexpr double kEnforceThreshold = -1e-3; // kEnforce corrects edges compressed beyond this strain
 constexpr double kStableSafety = 0.75;      // of the explicit stability bound
-// the conjugate gradients multiply in single precision when the solve's relative residual is
-// this or looser and the system has this many blocks or more (per iteration, solve and
-// preconditioner update measured apart on the drape, one sitting: 17 x 17 12% dearer in
-// single precision, 33 the same, 65 and 129 3% cheaper, 257 21% cheaper)
+// the conjugate gradients multiply by the lower triangle in single precision (lower_kernels.h)
+// when the solve's relative residual is this or looser: its rounding (1e-7 of each product)
+// would show in a tighter solve. (Until the lower-triangle kernels, a system of under 1,000
+// blocks multiplied in double: in cache, converting the floats cost more than reading them;
+// the kernels convert four floats an instruction and read each block once for two rows, and
+// the drape at 17 x 17 took 8% fewer instructions in single precision, callgrind)
 constexpr double kSinglePrecisionTolerance = 1e-5;
-constexpr int kSinglePrecisionBlocks = 1000;
 constexpr int kMaxSolverIterations = 2000;  // conjugate gradient iterations per implicit step (at most)
 constexpr int kMultigridVertices = 1000;    // automatic: multigrid from this many free vertices
 // Automatic preconditioner: multigrid for a cloth of kMultigridVertices free vertices or more,
@@ -198,14 +199,6 @@ double thread_cpu_seconds() {
 Vec3 block_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& x, int i, Vec3 start = Vec3::Zero()) {
   Vec3 q = start;
   for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block[k] * x.segment<3>(3 * a.column[k]);
-  return q;
-}
-
-// (A x) at block row i from A's single-precision values, summed in double (the conjugate
-// gradients' products: bound by memory traffic, see BlockMatrix::block_f)
-Vec3 single_row_product(const cloth_detail::BlockMatrix& a, const Eigen::VectorXd& x, int i) {
-  Vec3 q = Vec3::Zero();
-  for (int k = a.start[i]; k < a.start[i + 1]; ++k) q.noalias() += a.block_f[k].cast<double>() * x.segment<3>(3 * a.column[k]);
   return q;
 }
 
@@ -278,7 +271,8 @@ struct HeldRows {
 };
 
 // Preconditioned conjugate gradients on the system p was last updated with (p.matrix(),
-// multiplied in 3x3 blocks of its single-precision values when the tolerance and size allow), until |b - A z| < tolerance |b| or kMaxSolverIterations;
+// multiplied by its lower triangle in single precision when the tolerance allows), until
+// |b - A z| < tolerance |b| or kMaxSolverIterations;
 // returns the iterations, counted as Eigen's ConjugateGradient counts them (the products
 // after the first). The vector operations of each iteration are fused into two passes (the
 // product with the step's dot product, the update with the residual's norm); everything
@@ -294,10 +288,18 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
                         Eigen::VectorXd& z, Eigen::VectorXd r, const std::vector<Filter>& filter) {
   const cloth_detail::BlockMatrix& a = p.matrix();
   const Eigen::Index size = b.size();
-  // single precision's rounding (1e-7 of each product) would show in a tighter solve, and a
-  // small system is in cache, where converting the values costs more than reading them
-  const bool single = tolerance >= kSinglePrecisionTolerance && a.size >= kSinglePrecisionBlocks;
-  const auto multiply = [&](const Eigen::VectorXd& x, int i) { return single ? single_row_product(a, x, i) : block_row_product(a, x, i); };
+  const bool single = tolerance >= kSinglePrecisionTolerance;
+  // q = A d and d . q (d is filtered, so d . S q = d . q): from the lower triangle in single
+  // precision (multigrid.h), or row by row in double
+  const auto multiply = [&](const Eigen::VectorXd& d, Eigen::VectorXd& q) {
+    if (single) return cloth_detail::lower_product(a, d, q);
+    double dq = 0.0;
+    for (int i = 0; i < a.size; ++i) {
+      q.segment<3>(3 * i) = block_row_product(a, d, i);
+      dq += q.segment<3>(3 * i).dot(d.segment<3>(3 * i));
+    }
+    return dq;
+  };
   apply_filter(filter, r);
   Eigen::VectorXd filtered_b = b;
   apply_filter(filter, filtered_b);
@@ -308,13 +310,7 @@ int conjugate_gradients(const cloth_detail::Preconditioner& p, const Eigen::Vect
   apply_filter(filter, direction);
   double rs = r.dot(direction);
   for (int iteration = 0; iteration < kMaxSolverIterations; ++iteration) {
-    // q = A d and d . q in one pass over the blocks (d is filtered, so d . S q = d . q)
-    double dq = 0.0;
-    for (int i = 0; i < a.size; ++i) {
-      const Vec3 q = multiply(direction, i);
-      product.segment<3>(3 * i) = q;
-      dq += q.dot(direction.segment<3>(3 * i));
-    }
+    const double dq = multiply(direction, product);
     apply_filter(filter, product);
     const double alpha = rs / dq;
     double r2 = 0.0;

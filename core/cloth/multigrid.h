@@ -28,6 +28,23 @@
 
 namespace simbake::cloth_detail {
 
+// The lower triangle of a symmetric 3x3-block matrix in single precision: block row i holds
+// A_ij for its columns j < i, ascending, then its diagonal A_ii last; the upper triangle is
+// its transpose (A_ji = A_ij^T). What the V-cycle's sweeps and the conjugate gradients'
+// products read (the latter when the solve's tolerance is 1e-5 or looser, cloth.cpp) through
+// lower_kernels.h: large systems are bound by memory traffic, and a preconditioner or a
+// solve to 1e-3 needs no more digits (the rounding is 1e-7 relative). Each block read serves
+// its row and, transposed, its column: a product reads half the blocks of full storage, and a
+// Gauss-Seidel sweep fused with the scatter of its residual (or of the rows it precedes) reads
+// them once where full storage read them twice or more. On the drape at 257 x 257 (66,049
+// blocks, 13 a row) the full single-precision copy was 31 MB, read 3 times an iteration.
+struct LowerBlocks {
+  std::vector<int> start;     // (size + 1)
+  std::vector<int> column;    // (entries) j < i ascending, then i
+  std::vector<int> source;    // (entries) the full matrix's entry of each block
+  std::vector<float> block;   // (9 entries + 1) values, 9 a block column-major, and a pad (lower_kernels.h)
+};
+
 // A symmetric 3x3-block sparse matrix, block rows in compressed form (full storage)
 struct BlockMatrix {
   int size = 0;                                       // block rows (= block columns)
@@ -35,17 +52,16 @@ struct BlockMatrix {
   std::vector<int> column;                            // (entries) block column, ascending per row
   std::vector<int> diagonal;                          // (size) the entry of each row's diagonal block
   std::vector<Mat3, Eigen::aligned_allocator<Mat3>> block;  // (entries) values
-  // (entries) the values in single precision, which the V-cycle and the conjugate
-  // gradients' products read (the latter when the solve's tolerance is 1e-5 or looser and
-  // the system has 1,000 blocks or more, cloth.cpp): large systems are bound by memory
-  // traffic (the drape's first second at 257 x 257: solve 35.1 CPU s, 46.7 with the product
-  // in double), and a preconditioner or a solve to 1e-3 needs no more digits (the rounding
-  // is 1e-7 relative)
-  std::vector<Eigen::Matrix3f, Eigen::aligned_allocator<Eigen::Matrix3f>> block_f;
+  LowerBlocks lower;                                  // the lower triangle in single precision
   // (entries) where each block's values sit in the Eigen matrix it is copied from
   // (copy_values): its (0, 0) entry, and the distance between its three columns there
   std::vector<int> source, stride;
 };
+
+// y = A x from A's lower triangle in single precision (summed in double): each block A_ij
+// gives A_ij x_j to row i and A_ij^T x_i to row j. Returns x . A x (from the same blocks:
+// sum_i x_i . A_ii x_i + 2 sum_(j < i) x_i . A_ij x_j)
+double lower_product(const BlockMatrix& a, const Eigen::VectorXd& x, Eigen::VectorXd& y);
 
 // visit(r, c, block) for every 3x3 block (row block r, column block c) of a full symmetric
 // Eigen matrix of dense 3x3 blocks, column block by column block, as an Eigen::Map onto its
@@ -126,6 +142,7 @@ class Multigrid final : public Preconditioner {
 
   int levels() const { return static_cast<int>(matrix_.size()); }
   int level_size(int l) const { return matrix_[l].size; }  // block rows of level l (0 finest)
+  const BlockMatrix& level(int l) const { return matrix_[l]; }  // the operator of level l
 
  private:
   // A product's recipe: target[k] += weight[k] x source[from[k]] (3x3 blocks)
@@ -137,7 +154,7 @@ class Multigrid final : public Preconditioner {
   std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
   std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l
   std::vector<Recipe> right_, left_;          // (levels - 1) A P from A, then P^T (A P)
-  std::vector<std::vector<Mat3, Eigen::aligned_allocator<Mat3>>> inverse_diagonal_;  // per level
+  std::vector<std::vector<double>> inverse_diagonal_;  // per level (9 blocks + 1) D^-1, 9 a block column-major, and a pad
   Eigen::LLT<Eigen::MatrixXd> coarsest_;      // dense Cholesky of the coarsest level
   // V-cycle scratch per level: right-hand side, solution, residual
   mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;

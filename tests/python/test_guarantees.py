@@ -286,8 +286,11 @@ def temps(directory: Path) -> list[str]:
 
 def start_long_bake(tmp_path: Path) -> subprocess.Popen:
     (tmp_path / "long.toml").write_text(textwrap.dedent(LONG_SCENE))
+    # Ctrl-C's default action in the bake, as in a terminal: a shell that starts a test run in
+    # the background hands its children SIGINT ignored, which Python then keeps ignoring
     proc = subprocess.Popen([sys.executable, "-m", "simbake", "bake", "long.toml", "-o", "out.usdc", "-q"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while not temps(tmp_path):  # the bake has started writing
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
