@@ -27,7 +27,7 @@ demo: install
 # checked at every frame, takes a few minutes alone)
 test: install
 	$(VENV)/bin/ctest --test-dir $(BUILD) --output-on-failure --timeout 300 -j2
-	$(PY) -m pytest -n auto --durations=10
+	$(PY) -m pytest -n auto --dist worksteal --durations=10
 
 bench: install
 	$(PY) -m pip install -q "matplotlib>=3.7"
