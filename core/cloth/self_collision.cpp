@@ -20,12 +20,10 @@ namespace {
 constexpr double kRepulsionRate = 0.1;      // a pair closer than h separates by 0.1 (h - d) per step at most
 constexpr double kCollisionTolerance = 1e-2; // of h: coplanar pairs this close count as colliding
 constexpr double kSeparation = 1e-3;        // of h per step: the separating speed a collision impulse leaves
-constexpr long long kMaxCells = 4096;       // a query over more grid cells scans every item
 constexpr double kMargin = 0.1;             // of the mean edge: how far a vertex's box reaches past
                                             // its start and end of the step
 constexpr size_t kMovedFraction = 8;       // all pairs are found again when more than 1 / 8 of the vertices
-                                            // leave their boxes at once, the grids built again when 1 / 8
-                                            // of them have since the last full search
+                                            // leave their boxes at once
 constexpr size_t kChunk = 512;              // pairs per parallel task (fixed: same result at any thread count)
 constexpr double kFlat = 0.1;               // a pivot's triangles are flat when their normals stay within
                                             // acos(0.1) = 84 degrees of one direction (any angle under 90
@@ -195,214 +193,6 @@ void parallel_collect(size_t count, std::vector<T>& out, ForEach&& for_each) {
 
 }  // namespace
 
-// Uniform grids over boxes, each item entered once, in the cell of its box's centre, in the
-// first of a few levels whose cell is as large as its box along each axis. A level's cell is
-// as large as the largest of its items along each axis, its items those no more than 4 x the
-// median extent of the items left for it along every axis (the rest go on to the next level:
-// a cloth half stopped on a body and half still falling has the falling part's long boxes
-// in a level of their own). A box meets a query's box only if its centre lies within half a
-// cell of it, so a query scans the cells there, in every level, and visits each item at most
-// once; queries share nothing and may run in parallel. A cell is found through a hash table
-// of a level's non-empty cells; each level keeps its own copy of its items' boxes, in cell
-// order.
-class SelfCollision::Grid {
- public:
-  explicit Grid(const std::vector<Box3>& boxes) {
-    std::vector<int> left(boxes.size());
-    std::iota(left.begin(), left.end(), 0);
-    for (int level = 0; level < kLevels && !left.empty(); ++level) {
-      levels_.emplace_back(boxes, left, level + 1 == kLevels);
-    }
-  }
-
-  // visit(i, j), i < j, once for every pair of the grid's items whose boxes meet: in each
-  // level, each cell against itself and its 13 neighbours ahead of it (centres of meeting
-  // boxes lie at most a cell apart), cells in parallel in fixed chunks, the pairs in cell
-  // order; then each item of a level against the levels before it
-  template <class Keep>
-  void self_pairs(std::vector<std::pair<int, int>>& out, Keep&& keep) const {
-    const auto offer = [&](int a, int b, std::vector<std::pair<int, int>>& found) {
-      const int i = std::min(a, b), j = std::max(a, b);
-      if (keep(i, j)) found.emplace_back(i, j);
-    };
-    for (size_t l = 0; l < levels_.size(); ++l) {
-      const Level& level = levels_[l];
-      level.self_pairs(out, offer);
-      if (l == 0) continue;
-      parallel_collect(level.items.size(), out, [&](size_t e, std::vector<std::pair<int, int>>& found) {
-        for (size_t m = 0; m < l; ++m) {
-          levels_[m].query(level.boxes[e], [&](int j) { offer(level.items[e], j, found); });
-        }
-      });
-    }
-  }
-
-  // visit(item) once for every item whose box meets `box`
-  template <class Visit>
-  void query(const Box3& box, Visit&& visit) const {
-    for (const Level& level : levels_) level.query(box, visit);
-  }
-
- private:
-  static constexpr int kLevels = 8;
-  using Cell = std::array<int, 3>;
-  struct Level {
-    Vec3 cell = Vec3::Ones();         // (m) along each axis
-    std::vector<std::uint64_t> keys;  // the non-empty cells, ascending
-    std::vector<int> first;           // (cells + 1) each cell's first entry
-    std::vector<int> items;           // (entries) items in cell order
-    std::vector<Box3> boxes;          // (entries) their boxes
-    std::vector<Box3> bounds;         // (cells) the box holding each cell's boxes
-    std::vector<int> table;           // hash table of cell indices, -1 where empty
-    bool scan = false;                // a query scans every entry (the last level's items not in cells)
-
-    // the items of `left` small enough for this level (all of them in the last), the others
-    // left in `left`
-    Level(const std::vector<Box3>& all, std::vector<int>& left, bool last) {
-      const size_t n = left.size();
-      std::vector<Vec3> extents(n);
-      for (size_t i = 0; i < n; ++i) extents[i] = all[left[i]].max() - all[left[i]].min();
-      Vec3 median;
-      std::vector<double> sorted(n);
-      for (int a = 0; a < 3; ++a) {
-        for (size_t i = 0; i < n; ++i) sorted[i] = extents[i][a];
-        std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
-        median[a] = sorted[n / 2];
-      }
-      const auto fits = [&](const Vec3& e) { return last || (e.array() <= 4.0 * median.array()).all(); };
-      cell.setZero();
-      for (const Vec3& e : extents) {
-        if (fits(e) && e.allFinite()) cell = cell.cwiseMax(e);
-      }
-      for (int a = 0; a < 3; ++a) {
-        if (!(cell[a] > 0.0 && std::isfinite(cell[a]))) cell[a] = std::isfinite(median[a]) && median[a] > 0.0 ? median[a] : 1.0;
-      }
-      std::vector<std::pair<std::uint64_t, int>> entries;
-      std::vector<int> rest;
-      for (size_t i = 0; i < n; ++i) {
-        Cell c;
-        if (!fits(extents[i])) {
-          rest.push_back(left[i]);
-        } else if (cell_of(all[left[i]].center(), c)) {
-          entries.emplace_back(key(c), left[i]);
-        } else {  // far away or not finite: in the last level, offered to every query
-          scan = true;
-          entries.emplace_back(0, left[i]);
-        }
-      }
-      left.swap(rest);
-      std::sort(entries.begin(), entries.end());
-      items.resize(entries.size());
-      boxes.resize(entries.size());
-      for (size_t e = 0; e < entries.size(); ++e) {
-        if (e == 0 || entries[e].first != entries[e - 1].first) {
-          keys.push_back(entries[e].first);
-          first.push_back(static_cast<int>(e));
-          bounds.emplace_back();
-        }
-        items[e] = entries[e].second;
-        boxes[e] = all[entries[e].second];
-        bounds.back().extend(boxes[e]);
-      }
-      first.push_back(static_cast<int>(entries.size()));
-      // open addressing, at most half full
-      size_t size = 16;
-      while (size < 2 * keys.size()) size *= 2;
-      table.assign(size, -1);
-      for (size_t k = 0; k < keys.size(); ++k) {
-        size_t slot = hash(keys[k]) & (size - 1);
-        while (table[slot] >= 0) slot = (slot + 1) & (size - 1);
-        table[slot] = static_cast<int>(k);
-      }
-    }
-
-    template <class Offer>
-    void self_pairs(std::vector<std::pair<int, int>>& out, Offer&& offer) const {
-      static const int ahead[13][3] = {{1, 0, 0},  {-1, 1, 0}, {0, 1, 0},  {1, 1, 0},  {-1, -1, 1},
-                                       {0, -1, 1}, {1, -1, 1}, {-1, 0, 1}, {0, 0, 1},  {1, 0, 1},
-                                       {-1, 1, 1}, {0, 1, 1},  {1, 1, 1}};
-      const auto meet = [&](int p, int q, std::vector<std::pair<int, int>>& found) {
-        if (boxes[p].intersects(boxes[q])) offer(items[p], items[q], found);
-      };
-      if (scan) {  // every pair
-        for (size_t p = 0; p < items.size(); ++p)
-          for (size_t q = p + 1; q < items.size(); ++q) meet(static_cast<int>(p), static_cast<int>(q), out);
-        return;
-      }
-      parallel_collect(keys.size(), out, [&](size_t k, std::vector<std::pair<int, int>>& found) {
-        const int begin = first[k], end = first[k + 1];
-        for (int p = begin; p < end; ++p)
-          for (int q = p + 1; q < end; ++q) meet(p, q, found);
-        const Cell here = unkey(keys[k]);
-        for (const auto& d : ahead) {
-          const int there = find(key(Cell{here[0] + d[0], here[1] + d[1], here[2] + d[2]}));
-          if (there < 0 || !bounds[k].intersects(bounds[there])) continue;
-          for (int p = begin; p < end; ++p) {
-            if (!boxes[p].intersects(bounds[there])) continue;
-            for (int q = first[there]; q < first[there + 1]; ++q) meet(p, q, found);
-          }
-        }
-      });
-    }
-
-    template <class Visit>
-    void query(const Box3& box, Visit&& visit) const {
-      Cell lo, hi;
-      long long count = kMaxCells + 1;
-      if (!scan && cell_of(box.min() - cell / 2, lo) && cell_of(box.max() + cell / 2, hi)) {
-        count = 1;
-        for (int k = 0; k < 3; ++k) count *= static_cast<long long>(hi[k]) - lo[k] + 1;
-      }
-      if (count > kMaxCells || count > static_cast<long long>(keys.size())) {  // more cells than there are: every item
-        for (size_t e = 0; e < items.size(); ++e) {
-          if (boxes[e].intersects(box)) visit(items[e]);
-        }
-        return;
-      }
-      for (int a = lo[0]; a <= hi[0]; ++a)
-        for (int b = lo[1]; b <= hi[1]; ++b)
-          for (int c = lo[2]; c <= hi[2]; ++c) {
-            const int found = find(key(Cell{a, b, c}));
-            if (found < 0 || !bounds[found].intersects(box)) continue;
-            for (int e = first[found]; e < first[found + 1]; ++e) {
-              if (boxes[e].intersects(box)) visit(items[e]);
-            }
-          }
-    }
-
-    int find(std::uint64_t k) const {
-      for (size_t slot = hash(k) & (table.size() - 1);; slot = (slot + 1) & (table.size() - 1)) {
-        const int found = table[slot];
-        if (found < 0 || keys[found] == k) return found;
-      }
-    }
-    bool cell_of(const Vec3& p, Cell& c) const {
-      for (int k = 0; k < 3; ++k) {
-        const double a = p[k] / cell[k];
-        if (!(std::abs(a) < 1e6)) return false;
-        c[k] = static_cast<int>(std::floor(a));
-      }
-      return true;
-    }
-  };
-  std::vector<Level> levels_;
-
-  static size_t hash(std::uint64_t k) {
-    k ^= k >> 33;
-    k *= 0xff51afd7ed558ccdULL;
-    k ^= k >> 33;
-    return static_cast<size_t>(k);
-  }
-  static std::uint64_t key(const Cell& c) {
-    const auto bits = [](int v) { return static_cast<std::uint64_t>(v + (1 << 20)) & 0x1FFFFF; };
-    return bits(c[0]) << 42 | bits(c[1]) << 21 | bits(c[2]);
-  }
-  static Cell unkey(std::uint64_t k) {
-    const auto value = [](std::uint64_t bits) { return static_cast<int>(bits & 0x1FFFFF) - (1 << 20); };
-    return Cell{value(k >> 42), value(k >> 21), value(k)};
-  }
-};
-
 namespace {
 
 // CSR lists of each vertex's items (items[i] holds count vertices): those of vertex k are
@@ -448,6 +238,7 @@ SelfCollision::SelfCollision(const Triangles& triangles, int vertex_count, const
       edges_(unique_edges(triangles_)),
       vertex_count_(vertex_count),
       cloth_vertices_(vertex_count) {
+  cloth_triangles_ = static_cast<int>(triangles.rows());
   for (size_t o = 0; o < obstacles.size(); ++o) {
     vertex_count_ += static_cast<int>(obstacles[o].vertices.rows());
     obstacle_of_.resize(vertex_count_ - cloth_vertices_, static_cast<int>(o));
@@ -496,12 +287,12 @@ Vec3 relative_velocity(const SelfCollision::Contact& c, const Points& v) {
 
 }  // namespace
 
-void SelfCollision::update_candidates(const Points& x, const Points& v, double dt, double pad,
+bool SelfCollision::update_candidates(const Points& x, const Points& v, double dt, double pad,
                                       SelfCollisionStatistics& stats) {
   const Candidates& c = candidates_;
   if (c.pad < pad || c.vertex_boxes.size() != static_cast<size_t>(vertex_count_)) {
     search_all(x, v, dt, pad, stats);
-    return;
+    return true;
   }
   // the vertices whose start or end left their box, or whose box is more than twice as large
   // as a new one would be (the box of a fast vertex that has since slowed down)
@@ -514,27 +305,13 @@ void SelfCollision::update_candidates(const Points& x, const Points& v, double d
       moved.push_back(k);
     }
   }
-  if (moved.empty()) return;
+  if (moved.empty()) return false;
   if (kMovedFraction * moved.size() > static_cast<size_t>(vertex_count_)) {
     search_all(x, v, dt, pad, stats);
-    return;
+    return true;
   }
-  // many stale items: the grids are built again over the boxes as they are (the pairs need no search)
-  if (kMovedFraction * (moved.size() + c.stale_points.size()) > static_cast<size_t>(vertex_count_)) build_grids();
   search_moved(x, v, dt, moved, stats);
-}
-
-void SelfCollision::build_grids() {
-  Candidates& c = candidates_;
-  c.point_grid = std::make_unique<Grid>(c.point_boxes);
-  c.triangle_grid = std::make_unique<Grid>(c.triangle_boxes);
-  c.edge_grid = std::make_unique<Grid>(c.edge_boxes);
-  c.stale_point.assign(c.point_boxes.size(), 0);
-  c.stale_triangle.assign(c.triangle_boxes.size(), 0);
-  c.stale_edge.assign(c.edge_boxes.size(), 0);
-  c.stale_points.clear();
-  c.stale_triangles.clear();
-  c.stale_edges.clear();
+  return false;
 }
 
 namespace {
@@ -726,39 +503,23 @@ void SelfCollision::forget_near(const std::vector<char>* moving) {
   }
 }
 
-void SelfCollision::activate_near(const Points& x, const Points& v, double dt, bool new_step,
-                                  SelfCollisionStatistics& stats) {
-  Near& m = near_;
-  if (new_step) {
-    for (auto& pairs : m.pairs) pairs.clear();
-    std::fill(m.active.begin(), m.active.end(), 0);
-  }
-  // what changed since the last call: at a new step everything; within a step (the same x)
-  // the vertices whose velocities the passes between changed, and so their triangles and the
-  // pivots those triangles belong to
+void SelfCollision::bound_normals(const Points& x, const Points& v, double dt, bool new_step) {
+  Normals& m = normals_;
   const int nt = static_cast<int>(triangles_.rows());
-  const bool all = new_step || m.velocity.rows() != v.rows() || m.dt != dt;
-  m.triangle_changed.assign(nt, all);
-  m.check.assign(vertex_count_, all);
-  if (!all) {
+  m.all = new_step || m.velocity.rows() != v.rows() || m.dt != dt || m.normal.size() != static_cast<size_t>(nt);
+  m.changed.assign(nt, m.all);
+  if (!m.all) {
     for (int k = 0; k < vertex_count_; ++k) {
       if (v.row(k) == m.velocity.row(k)) continue;
-      for (int i = triangle_first_[k]; i < triangle_first_[k + 1]; ++i) {
-        const int t = vertex_triangles_[i];
-        m.triangle_changed[t] = 1;
-        for (int j = 0; j < 3; ++j) m.check[triangles_(t, j)] = 1;
-      }
+      for (int i = triangle_first_[k]; i < triangle_first_[k + 1]; ++i) m.changed[vertex_triangles_[i]] = 1;
     }
   }
   m.velocity = v;
   m.dt = dt;
-  // each triangle's normal over the step, n(s) = (e1 + s d1) x (e2 + s d2), by its Bernstein
-  // coefficients on [0, 1]: n(s) is a convex combination of them, so n(s) . a is at least
-  // their least and |n(s)| at most their largest
   m.normal.resize(nt);
   m.largest.resize(nt);
   tbb::parallel_for(0, nt, [&](int t) {
-    if (!m.triangle_changed[t]) return;
+    if (!m.changed[t]) return;
     const Vec3 a = row(x, triangles_(t, 0));
     const Vec3 e1 = row(x, triangles_(t, 1)) - a, e2 = row(x, triangles_(t, 2)) - a;
     const Vec3 da = dt * row(v, triangles_(t, 0));
@@ -767,16 +528,36 @@ void SelfCollision::activate_near(const Points& x, const Points& v, double dt, b
     const auto& b = m.normal[t] = {c0, c0 + 0.5 * c1, c0 + c1 + c2};
     m.largest[t] = std::sqrt(std::max({b[0].squaredNorm(), b[1].squaredNorm(), b[2].squaredNorm()}));
   });
+}
+
+void SelfCollision::activate_near(const Points& x, const Points& v, double dt, bool new_step,
+                                  SelfCollisionStatistics& stats) {
+  Near& m = near_;
+  const Normals& normals = normals_;
+  if (new_step) {
+    for (auto& pairs : m.pairs) pairs.clear();
+    std::fill(m.active.begin(), m.active.end(), 0);
+  }
+  // the pivots of the triangles whose normals changed
+  const int nt = static_cast<int>(triangles_.rows());
+  m.check.assign(vertex_count_, normals.all);
+  if (!normals.all) {
+    for (int t = 0; t < nt; ++t) {
+      if (normals.changed[t]) {
+        for (int j = 0; j < 3; ++j) m.check[triangles_(t, j)] = 1;
+      }
+    }
+  }
   const auto flat = [&](int q) {
     Vec3 axis = Vec3::Zero();
-    for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) axis += m.normal[vertex_triangles_[i]][0];
+    for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) axis += normals.normal[vertex_triangles_[i]][0];
     if (!(axis.squaredNorm() > 0.0)) return false;
     axis.normalize();
     for (int i = triangle_first_[q]; i < triangle_first_[q + 1]; ++i) {
       const int t = vertex_triangles_[i];
-      const auto& b = m.normal[t];
+      const auto& b = normals.normal[t];
       const double least = std::min({b[0].dot(axis), b[1].dot(axis), b[2].dot(axis)});
-      if (!(least >= kFlat * m.largest[t])) return false;
+      if (!(least >= kFlat * normals.largest[t])) return false;
     }
     return true;
   };
@@ -806,6 +587,149 @@ Box3 SelfCollision::vertex_box(const Points& x, const Points& v, double dt, int 
   return grown(Box3(from, from).extend(from + dt * row(v, k) - c.frame_step), c.margin);
 }
 
+// ---- the broad phase: the trees (cloth/patch_tree.h)
+
+void SelfCollision::build_trees(const Points& x) {
+  const int nt = static_cast<int>(triangles_.rows());
+  std::vector<int> cloth(cloth_triangles_), obstacles(nt - cloth_triangles_);
+  std::iota(cloth.begin(), cloth.end(), 0);
+  std::iota(obstacles.begin(), obstacles.end(), cloth_triangles_);
+  trees_[0].tree = PatchTree(triangles_, std::move(cloth), x);
+  trees_[1].tree = PatchTree(triangles_, std::move(obstacles), x);
+  // homes: a vertex's first triangle's leaf, an edge's first triangle's
+  point_home_.assign(vertex_count_, Home{});
+  orphans_.clear();
+  for (int k = 0; k < vertex_count_; ++k) {
+    if (triangle_first_[k] == triangle_first_[k + 1]) {
+      orphans_.push_back(k);
+    } else {
+      point_home_[k] = triangle_home(vertex_triangles_[triangle_first_[k]]);
+    }
+  }
+  edge_home_.assign(edges_.size(), Home{});
+  for (size_t e = 0; e < edges_.size(); ++e) {
+    const auto [a, b] = edges_[e];
+    for (int i = triangle_first_[a]; i < triangle_first_[a + 1]; ++i) {
+      const int t = vertex_triangles_[i];
+      if (on_triangle(triangles_, t, b)) {
+        edge_home_[e] = triangle_home(t);
+        break;
+      }
+    }
+  }
+  for (int i = 0; i < 2; ++i) {
+    Tree& tree = trees_[i];
+    const int leaves = tree.tree.leaf_count();
+    const auto lists = [&](const std::vector<Home>& homes, std::vector<int>& first, std::vector<int>& items) {
+      first.assign(leaves + 1, 0);
+      for (const Home& h : homes) {
+        if (h.tree == i) ++first[h.leaf + 1];
+      }
+      for (int l = 0; l < leaves; ++l) first[l + 1] += first[l];
+      items.resize(first[leaves]);
+      std::vector<int> next(first.begin(), first.end() - 1);
+      for (size_t k = 0; k < homes.size(); ++k) {
+        if (homes[k].tree == i) items[next[homes[k].leaf]++] = static_cast<int>(k);
+      }
+    };
+    lists(point_home_, tree.point_first, tree.points);
+    lists(edge_home_, tree.edge_first, tree.edges);
+    tree.cull.assign(leaves, -1);
+  }
+  trees_built_ = true;
+}
+
+SelfCollision::Home SelfCollision::triangle_home(int t) const {
+  const int i = t < cloth_triangles_ ? 0 : 1;
+  return {i, trees_[i].tree.leaf_of(t)};
+}
+
+int SelfCollision::skipped(const Home& home, int tree) const {
+  return home.tree == tree && tree == 0 ? trees_[0].cull[home.leaf] : -1;
+}
+
+void SelfCollision::leaf_pairs(int i, int a, int j, int b, std::array<std::vector<Pair>, 2>& out) const {
+  const Candidates& c = candidates_;
+  const Tree &A = trees_[i], &B = trees_[j];
+  const PatchTree::Node &na = A.tree.nodes()[A.tree.leaf_node(a)], &nb = B.tree.nodes()[B.tree.leaf_node(b)];
+  const bool same = i == j && a == b;
+  const auto points_against = [&](const Tree& P, int leaf, const Tree& T, const PatchTree::Node& node) {
+    for (int m = P.point_first[leaf]; m < P.point_first[leaf + 1]; ++m) {
+      const int k = P.points[m];
+      for (int p = node.begin; p < node.end; ++p) {
+        const int t = T.tree.order()[p];
+        if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
+          out[0].push_back(point_triangle_pair(k, t));
+        }
+      }
+    }
+  };
+  points_against(A, a, B, nb);
+  if (!same) points_against(B, b, A, na);
+  for (int m = A.edge_first[a]; m < A.edge_first[a + 1]; ++m) {
+    const int e = A.edges[m];
+    for (int q = same ? m + 1 : B.edge_first[b]; q < B.edge_first[b + 1]; ++q) {
+      const int f = B.edges[q];
+      if (c.edge_boxes[e].intersects(c.edge_boxes[f]) && edge_candidate(e, f)) out[1].push_back(edge_pair(e, f));
+    }
+  }
+}
+
+void SelfCollision::self_pairs(int n, const Points& x, const Points& v, double dt,
+                               std::array<std::vector<Pair>, 2>& out) {
+  Tree& tree = trees_[0];
+  const PatchTree::Node& node = tree.tree.nodes()[n];
+  if (tree.tree.flat(n, normals_.normal, normals_.largest, x, v, dt)) {
+    std::fill(tree.cull.begin() + node.leaf_begin, tree.cull.begin() + node.leaf_end, n);
+    return;
+  }
+  if (node.leaf()) {
+    leaf_pairs(0, node.leaf_begin, 0, node.leaf_begin, out);
+    return;
+  }
+  self_pairs(node.child[0], x, v, dt, out);
+  self_pairs(node.child[1], x, v, dt, out);
+  cross_pairs(0, node.child[0], 0, node.child[1], out);
+}
+
+void SelfCollision::cross_pairs(int i, int a, int j, int b, std::array<std::vector<Pair>, 2>& out) const {
+  const PatchTree::Node &na = trees_[i].tree.nodes()[a], &nb = trees_[j].tree.nodes()[b];
+  if (!na.box.intersects(nb.box)) return;
+  if (na.leaf() && nb.leaf()) {
+    leaf_pairs(i, na.leaf_begin, j, nb.leaf_begin, out);
+  } else if (na.leaf() || (!nb.leaf() && nb.end - nb.begin > na.end - na.begin)) {
+    cross_pairs(i, a, j, nb.child[0], out);
+    cross_pairs(i, a, j, nb.child[1], out);
+  } else {
+    cross_pairs(i, na.child[0], j, b, out);
+    cross_pairs(i, na.child[1], j, b, out);
+  }
+}
+
+namespace {
+
+// visit(leaf) for each leaf of `tree` whose box meets `box`, not below node `skip`
+template <class Visit>
+void query(const PatchTree& tree, const Box3& box, int skip, Visit&& visit) {
+  if (tree.empty()) return;
+  int stack[64];
+  int size = 0;
+  stack[size++] = 0;
+  while (size > 0) {
+    const int n = stack[--size];
+    const PatchTree::Node& node = tree.nodes()[n];
+    if (n == skip || !node.box.intersects(box)) continue;
+    if (node.leaf()) {
+      visit(node.leaf_begin);
+    } else {
+      stack[size++] = node.child[1];
+      stack[size++] = node.child[0];
+    }
+  }
+}
+
+}  // namespace
+
 void SelfCollision::search_all(const Points& x, const Points& v, double dt, double pad,
                                SelfCollisionStatistics& stats) {
   Candidates& c = candidates_;
@@ -830,22 +754,28 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
   }
   for (int t = 0; t < nt; ++t) c.triangle_boxes[t] = item_box(c.vertex_boxes, triangles_.row(t).data(), 3, pad / 2);
   for (int e = 0; e < ne; ++e) c.edge_boxes[e] = item_box(c.vertex_boxes, edges_[e].data(), 2, pad / 2);
-  build_grids();
-  // points against triangles
-  c.pairs[0].clear();
-  parallel_collect(n, c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
-    const int k = static_cast<int>(i);
-    c.triangle_grid->query(c.point_boxes[k], [&](int t) {
-      if (point_triangle_candidate(k, t)) out.push_back(point_triangle_pair(k, t));
-    });
-  });
-  // edges against edges, each pair once
-  std::vector<std::pair<int, int>> edge_pairs;
-  c.edge_grid->self_pairs(edge_pairs, [&](int e, int f) { return edge_candidate(e, f); });
-  c.pairs[1].resize(edge_pairs.size());
-  for (size_t p = 0; p < edge_pairs.size(); ++p) {
-    const auto& [e, f] = edge_pairs[p];
-    c.pairs[1][p] = edge_pair(e, f);
+  if (!trees_built_) build_trees(x);
+  for (Tree& tree : trees_) {
+    tree.tree.refit(c.triangle_boxes);
+    std::fill(tree.cull.begin(), tree.cull.end(), -1);
+  }
+  for (auto& pairs : c.pairs) pairs.clear();
+  if (!trees_[0].tree.empty()) {
+    self_pairs(0, x, v, dt, c.pairs);
+    if (!trees_[1].tree.empty()) cross_pairs(0, 0, 1, 0, c.pairs);
+  }
+  for (int k : orphans_) {
+    for (int i = 0; i < 2; ++i) {
+      query(trees_[i].tree, c.point_boxes[k], -1, [&](int leaf) {
+        const PatchTree::Node& node = trees_[i].tree.nodes()[trees_[i].tree.leaf_node(leaf)];
+        for (int p = node.begin; p < node.end; ++p) {
+          const int t = trees_[i].tree.order()[p];
+          if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
+            c.pairs[0].push_back(point_triangle_pair(k, t));
+          }
+        }
+      });
+    }
   }
   start_.proximity.clear();
   forget_near(nullptr);
@@ -859,14 +789,12 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
   Candidates& c = candidates_;
   const double half = c.pad / 2;
   std::vector<char> moving(vertex_count_, 0);
-  // new boxes: the moved vertices', and their triangles' and edges' (now stale)
+  // new boxes: the moved vertices', and their triangles' and edges'
   std::vector<int> triangles, edges;  // touched, ascending
   for (int k : moved) {
     moving[k] = 1;
     c.vertex_boxes[k] = vertex_box(x, v, dt, k);
     c.point_boxes[k] = grown(c.vertex_boxes[k], half);
-    if (!c.stale_point[k]) c.stale_points.push_back(k);
-    c.stale_point[k] = 1;
     triangles.insert(triangles.end(), vertex_triangles_.begin() + triangle_first_[k],
                      vertex_triangles_.begin() + triangle_first_[k + 1]);
     edges.insert(edges.end(), vertex_edges_.begin() + edge_first_[k], vertex_edges_.begin() + edge_first_[k + 1]);
@@ -876,17 +804,12 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
     items->erase(std::unique(items->begin(), items->end()), items->end());
   }
   std::vector<char> touched_edge(edges_.size(), 0);
-  for (int t : triangles) {
-    c.triangle_boxes[t] = item_box(c.vertex_boxes, triangles_.row(t).data(), 3, half);
-    if (!c.stale_triangle[t]) c.stale_triangles.push_back(t);
-    c.stale_triangle[t] = 1;
-  }
+  for (int t : triangles) c.triangle_boxes[t] = item_box(c.vertex_boxes, triangles_.row(t).data(), 3, half);
   for (int e : edges) {
     c.edge_boxes[e] = item_box(c.vertex_boxes, edges_[e].data(), 2, half);
-    if (!c.stale_edge[e]) c.stale_edges.push_back(e);
-    c.stale_edge[e] = 1;
     touched_edge[e] = 1;
   }
+  for (Tree& tree : trees_) tree.tree.refit(c.triangle_boxes, triangles);
   // the pairs and the repulsion contacts with a moved vertex go (the others' boxes are as
   // they were; their distances stay measured)
   const auto moves = [&](const int* vertex) { return moving[vertex[0]] || moving[vertex[1]] || moving[vertex[2]] || moving[vertex[3]]; };
@@ -899,47 +822,80 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
   proximity.erase(std::remove_if(proximity.begin(), proximity.end(), [&](const Contact& p) { return moves(p.vertex); }),
                   proximity.end());
   forget_near(&moving);
-  // every item whose box meets `box`: from the full search's grid (less its stale items) and
-  // a grid of the stale items
-  const auto stale_grid = [](const std::vector<int>& items, const std::vector<Box3>& boxes) {
-    std::vector<Box3> stale(items.size());
-    for (size_t i = 0; i < items.size(); ++i) stale[i] = boxes[items[i]];
-    return Grid(stale);
-  };
-  const Grid stale_points = stale_grid(c.stale_points, c.point_boxes);
-  const Grid stale_triangles = stale_grid(c.stale_triangles, c.triangle_boxes);
-  const Grid stale_edges = stale_grid(c.stale_edges, c.edge_boxes);
-  const auto near = [](const Grid& grid, const std::vector<char>& stale, const Grid& stale_grid,
-                       const std::vector<int>& stale_items, const Box3& box, auto&& visit) {
-    grid.query(box, [&](int i) {
-      if (!stale[i]) visit(i);
-    });
-    stale_grid.query(box, [&](int i) { visit(stale_items[i]); });
+  // each leaf, in both trees, whose box meets `box`, but those below the flat node where
+  // `home` is (the pairs there were left out by the full search, and still may be)
+  const auto leaves_near = [&](const Box3& box, const Home& home, auto&& visit) {
+    for (int i = 0; i < 2; ++i) {
+      query(trees_[i].tree, box, skipped(home, i), [&](int leaf) { visit(trees_[i], leaf); });
+    }
   };
   // moved points against every triangle; touched triangles against the points that did not move
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = moved[i];
-    near(*c.triangle_grid, c.stale_triangle, stale_triangles, c.stale_triangles, c.point_boxes[k], [&](int t) {
-      if (point_triangle_candidate(k, t)) out.push_back(point_triangle_pair(k, t));
+    leaves_near(c.point_boxes[k], point_home_[k], [&](const Tree& tree, int leaf) {
+      const PatchTree::Node& node = tree.tree.nodes()[tree.tree.leaf_node(leaf)];
+      for (int p = node.begin; p < node.end; ++p) {
+        const int t = tree.tree.order()[p];
+        if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
+          out.push_back(point_triangle_pair(k, t));
+        }
+      }
     });
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int t = triangles[i];
-    near(*c.point_grid, c.stale_point, stale_points, c.stale_points, c.triangle_boxes[t], [&](int k) {
-      if (!moving[k] && point_triangle_candidate(k, t)) out.push_back(point_triangle_pair(k, t));
+    const auto offer = [&](int k) {
+      if (!moving[k] && c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
+        out.push_back(point_triangle_pair(k, t));
+      }
+    };
+    leaves_near(c.triangle_boxes[t], triangle_home(t), [&](const Tree& tree, int leaf) {
+      for (int m = tree.point_first[leaf]; m < tree.point_first[leaf + 1]; ++m) offer(tree.points[m]);
     });
+    for (int k : orphans_) offer(k);
   });
   // touched edges against every edge (a pair of two touched edges once)
   parallel_collect(edges.size(), c.pairs[1], [&](size_t i, std::vector<Pair>& out) {
     const int e = edges[i];
-    near(*c.edge_grid, c.stale_edge, stale_edges, c.stale_edges, c.edge_boxes[e], [&](int f) {
-      if ((touched_edge[f] && f <= e) || !edge_candidate(e, f)) return;
-      out.push_back(edge_pair(e, f));
+    leaves_near(c.edge_boxes[e], edge_home_[e], [&](const Tree& tree, int leaf) {
+      for (int m = tree.edge_first[leaf]; m < tree.edge_first[leaf + 1]; ++m) {
+        const int f = tree.edges[m];
+        if ((touched_edge[f] && f <= e) || !c.edge_boxes[e].intersects(c.edge_boxes[f]) || !edge_candidate(e, f)) continue;
+        out.push_back(edge_pair(e, f));
+      }
     });
   });
   start_.measured = false;
   ++stats.updates;
   stats.candidates += static_cast<long long>(c.pairs[0].size() + c.pairs[1].size() - kept);
+}
+
+void SelfCollision::check_flat(const Points& x, const Points& v, double dt, SelfCollisionStatistics& stats) {
+  Tree& tree = trees_[0];
+  std::vector<int> nodes;
+  for (int leaf = 0; leaf < static_cast<int>(tree.cull.size());) {
+    const int n = tree.cull[leaf];
+    if (n < 0) {
+      ++leaf;
+      continue;
+    }
+    const PatchTree::Node& node = tree.tree.nodes()[n];
+    leaf = node.leaf_end;  // a node's leaves are consecutive
+    bool changed = normals_.all;
+    for (int p = node.begin; p < node.end && !changed; ++p) changed = normals_.changed[tree.tree.order()[p]];
+    if (changed) nodes.push_back(n);
+  }
+  Candidates& c = candidates_;
+  const size_t before = c.pairs[0].size() + c.pairs[1].size();
+  for (int n : nodes) {
+    if (tree.tree.flat(n, normals_.normal, normals_.largest, x, v, dt)) continue;
+    const PatchTree::Node& node = tree.tree.nodes()[n];
+    std::fill(tree.cull.begin() + node.leaf_begin, tree.cull.begin() + node.leaf_end, -1);
+    self_pairs(n, x, v, dt, c.pairs);
+  }
+  const size_t added = c.pairs[0].size() + c.pairs[1].size() - before;
+  if (added > 0) start_.measured = false;
+  stats.candidates += static_cast<long long>(added);
 }
 
 const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& v, double dt,
@@ -961,7 +917,8 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
       c.frame_step[a] = std::isfinite(motion[motion.size() / 2]) ? motion[motion.size() / 2] : 0.0;
     }
   }
-  update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats);
+  bound_normals(x, v, dt, new_step);
+  if (!update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats)) check_flat(x, v, dt, stats);
   activate_near(x, v, dt, new_step, stats);
   if (new_step || s.h != h) {
     // every pair measured again (in the same pass over the pairs that measures them)

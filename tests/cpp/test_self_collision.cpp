@@ -198,54 +198,6 @@ TEST(SelfCollision, SameBitsAtAnyThreadCount) {
 
 namespace {
 
-// brute force over the step: does the point p meet triangle abc, or edge a b cross edge c d,
-// at some s in [0, 1] (positions x0 + s (x1 - x0))? The signed volume of the four points is
-// sampled finely; at each sign change the root is bisected and the two features checked for
-// touching there. Written apart from the solver's cubic.
-bool meet(bool point, const std::array<int, 4>& ids, const Points& x0, const Points& x1) {
-  const auto at = [&](double s, int k) { return Vec3(x0.row(ids[k]).transpose() + s * (x1.row(ids[k]) - x0.row(ids[k])).transpose()); };
-  const auto volume = [&](double s) {
-    const Vec3 a = at(s, 0), b = at(s, 1), c = at(s, 2), d = at(s, 3);
-    return point ? (c - b).cross(d - b).dot(a - b) : (b - a).cross(d - c).dot(c - a);
-  };
-  const auto touching = [&](double s) {
-    const Vec3 a = at(s, 0), b = at(s, 1), c = at(s, 2), d = at(s, 3);
-    if (point) {  // a inside triangle b c d (barycentric weights of its projection)
-      const Vec3 n = (c - b).cross(d - b);
-      const double area = n.squaredNorm();
-      if (area == 0.0) return false;
-      const double u = (c - a).cross(d - a).dot(n) / area, v = (d - a).cross(b - a).dot(n) / area;
-      return u >= -1e-9 && v >= -1e-9 && 1.0 - u - v >= -1e-9;
-    }
-    // the closest points of the two segments, both inside, at the same place
-    const Vec3 e = b - a, f = d - c, r = a - c;
-    const double ee = e.squaredNorm(), ff = f.squaredNorm(), ef = e.dot(f), denominator = ee * ff - ef * ef;
-    if (denominator <= 1e-14 * ee * ff) return false;
-    const double s1 = (ef * f.dot(r) - ff * e.dot(r)) / denominator, t1 = (ee * f.dot(r) - ef * e.dot(r)) / denominator;
-    return s1 >= -1e-9 && s1 <= 1 + 1e-9 && t1 >= -1e-9 && t1 <= 1 + 1e-9 && (a + s1 * e - c - t1 * f).norm() < 1e-6;
-  };
-  constexpr int kSamples = 200;
-  double previous = volume(0.0);
-  for (int i = 1; i <= kSamples; ++i) {
-    double lo = (i - 1.0) / kSamples, hi = static_cast<double>(i) / kSamples;
-    const double next = volume(hi);
-    if ((previous < 0.0) != (next < 0.0)) {
-      double f_lo = previous;
-      for (int k = 0; k < 60; ++k) {
-        const double mid = 0.5 * (lo + hi), f_mid = volume(mid);
-        if ((f_lo < 0.0) == (f_mid < 0.0)) {
-          lo = mid;
-          f_lo = f_mid;
-        } else {
-          hi = mid;
-        }
-      }
-      if (touching(0.5 * (lo + hi))) return true;
-    }
-    previous = next;
-  }
-  return false;
-}
 
 }  // namespace
 
