@@ -19,7 +19,7 @@ constexpr double kRoom = 1e-6;  // of the largest coefficient: the room the star
 
 }  // namespace
 
-PatchTree::PatchTree(const Triangles& triangles, std::vector<int> ids, const Points& x) : triangles_(triangles) {
+PatchTree::PatchTree(const Triangles& triangles, std::vector<int> ids, const Points& x, bool patches) {
   leaf_of_.assign(triangles.rows(), -1);
   if (ids.empty()) return;
   std::vector<Vec3> centroid(triangles.rows(), Vec3::Zero());
@@ -29,7 +29,7 @@ PatchTree::PatchTree(const Triangles& triangles, std::vector<int> ids, const Poi
   }
   build(ids, 0, static_cast<int>(ids.size()), -1, centroid);
   order_ = std::move(ids);
-  find_loops(x);
+  if (patches) find_loops(triangles, x);
 }
 
 int PatchTree::build(std::vector<int>& ids, int begin, int end, int parent, const std::vector<Vec3>& centroid) {
@@ -66,20 +66,20 @@ int PatchTree::build(std::vector<int>& ids, int begin, int end, int parent, cons
 // Each node's boundary loop and centre, where the node is a disk: its boundary half-edges
 // (those whose twin is not in the node) chain into one loop through distinct vertices, and
 // V - E + F = 1
-void PatchTree::find_loops(const Points& x) {
+void PatchTree::find_loops(const Triangles& triangles, const Points& x) {
   const int count = static_cast<int>(order_.size());
   const int vertices = static_cast<int>(x.rows());
   // twins: the triangle across each edge of each triangle (by position in order_), -1 for
   // none; a triangle on an edge of more than two triangles, or whose neighbour runs the
   // edge the same way (inconsistent orientation), is in no disk
-  std::vector<int> position(triangles_.rows(), -1);
+  std::vector<int> position(triangles.rows(), -1);
   for (int p = 0; p < count; ++p) position[order_[p]] = p;
   std::vector<std::pair<std::uint64_t, int>> half;  // (edge key, 3 p + j)
   half.reserve(3 * static_cast<size_t>(count));
   for (int p = 0; p < count; ++p) {
     const int t = order_[p];
     for (int j = 0; j < 3; ++j) {
-      const std::uint64_t a = triangles_(t, j), b = triangles_(t, (j + 1) % 3);
+      const std::uint64_t a = triangles(t, j), b = triangles(t, (j + 1) % 3);
       half.emplace_back(std::min(a, b) << 32 | std::max(a, b), 3 * p + j);
     }
   }
@@ -93,7 +93,7 @@ void PatchTree::find_loops(const Points& x) {
     if (j - i == 2) {
       const int h0 = half[i].second, h1 = half[i + 1].second;
       const int t0 = order_[h0 / 3], t1 = order_[h1 / 3];
-      if (triangles_(t0, h0 % 3) == triangles_(t1, h1 % 3)) {  // the same way along the edge
+      if (triangles(t0, h0 % 3) == triangles(t1, h1 % 3)) {  // the same way along the edge
         bad[h0 / 3] = bad[h1 / 3] = 1;
       } else {
         twin[h0] = h1 / 3;
@@ -116,14 +116,14 @@ void PatchTree::find_loops(const Points& x) {
     for (int p = node.begin; p < node.end; ++p) {
       const int t = order_[p];
       for (int j = 0; j < 3; ++j) {
-        const int k = triangles_(t, j);
+        const int k = triangles(t, j);
         if (seen[k] != n) {
           seen[k] = n;
           ++distinct;
         }
         const int across = twin[3 * p + j];
         if (across >= node.begin && across < node.end) continue;
-        const int to = triangles_(t, (j + 1) % 3);
+        const int to = triangles(t, (j + 1) % 3);
         if (next[k] >= 0) disk = false;  // two boundary edges leave one vertex: a pinch
         next[k] = to;
         starts.push_back(k);
@@ -150,12 +150,12 @@ void PatchTree::find_loops(const Points& x) {
     if (disk) {
       Vec3 mean = Vec3::Zero();
       for (int p = node.begin; p < node.end; ++p)
-        for (int j = 0; j < 3; ++j) mean += x.row(triangles_(order_[p], j)).transpose();
+        for (int j = 0; j < 3; ++j) mean += x.row(triangles(order_[p], j)).transpose();
       mean /= 3.0 * faces;
       double best = std::numeric_limits<double>::infinity();
       for (int p = node.begin; p < node.end; ++p) {
         for (int j = 0; j < 3; ++j) {
-          const int k = triangles_(order_[p], j);
+          const int k = triangles(order_[p], j);
           const double d = (x.row(k).transpose() - mean).squaredNorm();
           if (on_loop[k] != n && (d < best || (d == best && k < centre))) {
             best = d;
@@ -190,13 +190,12 @@ void PatchTree::refit(const std::vector<Box3>& triangle_boxes) {
 namespace {
 
 // the nodes above the leaves of `changed` triangles, descending (children before parents)
-std::vector<int> nodes_above(const std::vector<PatchTree::Node>& nodes, const PatchTree& tree,
-                             const std::vector<int>& changed) {
+std::vector<int> nodes_above(const PatchTree& tree, const std::vector<int>& changed) {
   std::vector<int> out;
   for (int t : changed) {
     const int leaf = tree.leaf_of(t);
     if (leaf < 0) continue;
-    for (int n = tree.leaf_node(leaf); n >= 0; n = nodes[n].parent) out.push_back(n);
+    for (int n = tree.leaf_node(leaf); n >= 0; n = tree.nodes()[n].parent) out.push_back(n);
   }
   std::sort(out.begin(), out.end(), std::greater<int>());
   out.erase(std::unique(out.begin(), out.end()), out.end());
@@ -206,7 +205,7 @@ std::vector<int> nodes_above(const std::vector<PatchTree::Node>& nodes, const Pa
 }  // namespace
 
 void PatchTree::refit(const std::vector<Box3>& triangle_boxes, const std::vector<int>& changed) {
-  for (int n : nodes_above(nodes_, *this, changed)) refit_node(n, triangle_boxes);
+  for (int n : nodes_above(*this, changed)) refit_node(n, triangle_boxes);
 }
 
 bool PatchTree::flat(int n, const std::vector<std::array<Vec3, 3>>& normal, const std::vector<double>& largest,

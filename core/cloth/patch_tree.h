@@ -52,8 +52,8 @@ class PatchTree {
 
   PatchTree() = default;
   // the tree over `ids` (rows of `triangles`), split at the positions x (n x 3, n >= every
-  // vertex index)
-  PatchTree(const Triangles& triangles, std::vector<int> ids, const Points& x);
+  // vertex index); without `patches`, a tree of boxes only, whose nodes are never flat
+  PatchTree(const Triangles& triangles, std::vector<int> ids, const Points& x, bool patches = true);
 
   bool empty() const { return nodes_.empty(); }
   const std::vector<Node>& nodes() const { return nodes_; }
@@ -74,12 +74,11 @@ class PatchTree {
             const Points& x, const Points& v, double dt) const;
 
  private:
-  Triangles triangles_;
   std::vector<Node> nodes_;
   std::vector<int> order_, loop_, leaf_node_, leaf_of_;
 
   int build(std::vector<int>& ids, int begin, int end, int parent, const std::vector<Vec3>& centroid);
-  void find_loops(const Points& x);
+  void find_loops(const Triangles& triangles, const Points& x);
   void refit_node(int n, const std::vector<Box3>& triangle_boxes);
 };
 

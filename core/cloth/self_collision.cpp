@@ -530,8 +530,7 @@ void SelfCollision::bound_normals(const Points& x, const Points& v, double dt, b
   });
 }
 
-void SelfCollision::activate_near(const Points& x, const Points& v, double dt, bool new_step,
-                                  SelfCollisionStatistics& stats) {
+void SelfCollision::activate_near(bool new_step, SelfCollisionStatistics& stats) {
   Near& m = near_;
   const Normals& normals = normals_;
   if (new_step) {
@@ -595,7 +594,7 @@ void SelfCollision::build_trees(const Points& x) {
   std::iota(cloth.begin(), cloth.end(), 0);
   std::iota(obstacles.begin(), obstacles.end(), cloth_triangles_);
   trees_[0].tree = PatchTree(triangles_, std::move(cloth), x);
-  trees_[1].tree = PatchTree(triangles_, std::move(obstacles), x);
+  trees_[1].tree = PatchTree(triangles_, std::move(obstacles), x, false);  // never tested for flatness
   // homes: a vertex's first triangle's leaf, an edge's first triangle's
   point_home_.assign(vertex_count_, Home{});
   orphans_.clear();
@@ -648,24 +647,25 @@ int SelfCollision::skipped(const Home& home, int tree) const {
   return home.tree == tree && tree == 0 ? trees_[0].cull[home.leaf] : -1;
 }
 
+void SelfCollision::point_against_leaf(int k, const Tree& tree, int leaf, std::vector<Pair>& out) const {
+  const Candidates& c = candidates_;
+  const PatchTree::Node& node = tree.tree.nodes()[tree.tree.leaf_node(leaf)];
+  for (int p = node.begin; p < node.end; ++p) {
+    const int t = tree.tree.order()[p];
+    if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
+      out.push_back(point_triangle_pair(k, t));
+    }
+  }
+}
+
 void SelfCollision::leaf_pairs(int i, int a, int j, int b, std::array<std::vector<Pair>, 2>& out) const {
   const Candidates& c = candidates_;
   const Tree &A = trees_[i], &B = trees_[j];
-  const PatchTree::Node &na = A.tree.nodes()[A.tree.leaf_node(a)], &nb = B.tree.nodes()[B.tree.leaf_node(b)];
   const bool same = i == j && a == b;
-  const auto points_against = [&](const Tree& P, int leaf, const Tree& T, const PatchTree::Node& node) {
-    for (int m = P.point_first[leaf]; m < P.point_first[leaf + 1]; ++m) {
-      const int k = P.points[m];
-      for (int p = node.begin; p < node.end; ++p) {
-        const int t = T.tree.order()[p];
-        if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
-          out[0].push_back(point_triangle_pair(k, t));
-        }
-      }
-    }
-  };
-  points_against(A, a, B, nb);
-  if (!same) points_against(B, b, A, na);
+  for (int m = A.point_first[a]; m < A.point_first[a + 1]; ++m) point_against_leaf(A.points[m], B, b, out[0]);
+  if (!same) {
+    for (int m = B.point_first[b]; m < B.point_first[b + 1]; ++m) point_against_leaf(B.points[m], A, a, out[0]);
+  }
   for (int m = A.edge_first[a]; m < A.edge_first[a + 1]; ++m) {
     const int e = A.edges[m];
     for (int q = same ? m + 1 : B.edge_first[b]; q < B.edge_first[b + 1]; ++q) {
@@ -766,15 +766,7 @@ void SelfCollision::search_all(const Points& x, const Points& v, double dt, doub
   }
   for (int k : orphans_) {
     for (int i = 0; i < 2; ++i) {
-      query(trees_[i].tree, c.point_boxes[k], -1, [&](int leaf) {
-        const PatchTree::Node& node = trees_[i].tree.nodes()[trees_[i].tree.leaf_node(leaf)];
-        for (int p = node.begin; p < node.end; ++p) {
-          const int t = trees_[i].tree.order()[p];
-          if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
-            c.pairs[0].push_back(point_triangle_pair(k, t));
-          }
-        }
-      });
+      query(trees_[i].tree, c.point_boxes[k], -1, [&](int leaf) { point_against_leaf(k, trees_[i], leaf, c.pairs[0]); });
     }
   }
   start_.proximity.clear();
@@ -832,15 +824,7 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
   // moved points against every triangle; touched triangles against the points that did not move
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int k = moved[i];
-    leaves_near(c.point_boxes[k], point_home_[k], [&](const Tree& tree, int leaf) {
-      const PatchTree::Node& node = tree.tree.nodes()[tree.tree.leaf_node(leaf)];
-      for (int p = node.begin; p < node.end; ++p) {
-        const int t = tree.tree.order()[p];
-        if (c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
-          out.push_back(point_triangle_pair(k, t));
-        }
-      }
-    });
+    leaves_near(c.point_boxes[k], point_home_[k], [&](const Tree& tree, int leaf) { point_against_leaf(k, tree, leaf, out); });
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
     const int t = triangles[i];
@@ -919,7 +903,7 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
   }
   bound_normals(x, v, dt, new_step);
   if (!update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats)) check_flat(x, v, dt, stats);
-  activate_near(x, v, dt, new_step, stats);
+  activate_near(new_step, stats);
   if (new_step || s.h != h) {
     // every pair measured again (in the same pass over the pairs that measures them)
     s.x = x;

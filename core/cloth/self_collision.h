@@ -302,9 +302,9 @@ class SelfCollision {
   int edge_index(int a, int b) const;  // the edge joining vertices a and b, or -1
   int point_pivot(int k, int t) const;  // the pivot of point k and triangle t (not on it) if near, else -1
   int edge_pivot(int e, int f) const;   // the pivot of edges e and f (no shared vertex) if near, else -1
-  // the near pairs of the pivots whose triangles are not flat over x + s dt v, s in [0, 1], made
-  // candidates (at a new step, only those)
-  void activate_near(const Points& x, const Points& v, double dt, bool new_step, SelfCollisionStatistics& stats);
+  // the near pairs of the pivots whose triangles are not flat over the step (normals_, which
+  // bound_normals set first), made candidates (at a new step, only those)
+  void activate_near(bool new_step, SelfCollisionStatistics& stats);
   // normals_ for the step from x to x + dt v: at a new step all, else those of the triangles
   // whose vertices' velocities changed since the last call
   void bound_normals(const Points& x, const Points& v, double dt, bool new_step);
@@ -320,6 +320,8 @@ class SelfCollision {
   Home triangle_home(int t) const;
   // the node of tree `tree` that a query from `home` skips: the flat node above it (-1: none)
   int skipped(const Home& home, int tree) const;
+  // the candidates of point k against the triangles of a leaf of `tree` whose boxes meet its, added to out
+  void point_against_leaf(int k, const Tree& tree, int leaf, std::vector<Pair>& out) const;
   // the candidates among the items of leaf a of tree i and leaf b of tree j (a leaf with
   // itself: each pair once), added to out
   void leaf_pairs(int i, int a, int j, int b, std::array<std::vector<Pair>, 2>& out) const;
