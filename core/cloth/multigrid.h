@@ -141,6 +141,9 @@ class Multigrid final : public Preconditioner {
   std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<Multigrid>(*this); }
 
   int levels() const { return static_cast<int>(matrix_.size()); }
+  // the finest level's smoother (multigrid.cpp, "The smoother"): the system's lower triangle
+  // between mesh-edge neighbours, the other blocks' norms added to the diagonal
+  const LowerBlocks& smoother() const { return smoother_.lower; }
   int level_size(int l) const { return matrix_[l].size; }  // block rows of level l (0 finest)
   const BlockMatrix& level(int l) const { return matrix_[l]; }  // the operator of level l
 
@@ -150,7 +153,16 @@ class Multigrid final : public Preconditioner {
     std::vector<int> from, to;
     std::vector<double> weight;
   };
+  // The finest level's smoother: the lower triangle's blocks between mesh-edge neighbours
+  // (copied from level 0's each update), the others (bending's, across hinges) dropped and
+  // their norms added to the diagonals of both their rows
+  struct EdgeSmoother {
+    LowerBlocks lower;                 // each row's edge neighbours j < i, then its diagonal
+    std::vector<int> kept;             // (off-diagonal entries) the entry of level 0's lower triangle each copies
+    std::vector<int> dropped_row, dropped_column, dropped_block;  // the other blocks (i, j < i); their block in level 0
+  };
   std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
+  EdgeSmoother smoother_;
   std::vector<Prolongation> prolongation_;    // (levels - 1) from level l + 1 to level l
   std::vector<BlockMatrix> product_;          // (levels - 1) scratch A_l P_l
   std::vector<Recipe> right_, left_;          // (levels - 1) A P from A, then P^T (A P)
@@ -159,6 +171,8 @@ class Multigrid final : public Preconditioner {
   // V-cycle scratch per level: right-hand side, solution, residual
   mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;
 
+  static EdgeSmoother edge_smoother(const BlockMatrix& a, const std::vector<std::vector<int>>& graph);
+  void update_smoother();
   void cycle(int level) const;
 };
 
