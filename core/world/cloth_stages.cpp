@@ -199,22 +199,33 @@ void World::step_cloths(double dt) {
     if (self) {
       repel();
       collide_self(1);
+      const auto over_limit = [&] { return limit > 0.0 && cloth.candidate_strain(dt) > limit * (1.0 + kFinalSlack); };
       bool clear = false;
       for (int round = 0; round < kFinalRounds; ++round) {
         limit_strain(true);
         clear = collide_self(2);
-        if (clear && (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kFinalSlack))) break;
+        if (clear && !over_limit()) break;
       }
       // impact zones move their vertices rigidly, which stretches the edges from a zone to
       // the cloth around it (the heap's landing reached 22%): those edges are limited again
       // with the zones held still (only the vertices around them move), and what that brings
-      // into collision joins a zone in turn; the zones have the last word
-      for (int round = 0; round < kZoneRounds && !clear; ++round) {
+      // into collision joins a zone in turn; the zones have the last word. A round that
+      // finds the cloth clear but an edge past the limit limits it again, then collides: a
+      // zone's rigid velocity stretches its own edges too (x + dt (v + w x r) is no rotation;
+      // 1.5% of the limit in one step of the heap's landing), and whatever left it so, the
+      // rounds up to here (the final ones ran out)
+      for (int round = 0; round < kZoneRounds; ++round) {
+        if (clear) {
+          if (!over_limit() || round + 1 == kZoneRounds) break;
+          limit_strain(true);
+          clear = collide_self(2);
+          if (clear) continue;
+        }
         on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
           self->impact_zones(x, v, w, dt, settings, stats_.self_collision);
           return true;
         });
-        if (limit <= 0.0 || cloth.candidate_strain(dt) <= limit * (1.0 + kFinalSlack)) break;
+        if (!over_limit()) break;
         if (round + 1 == kZoneRounds) break;
         {
           // the zones take the pushes of the edges around them as rigid bodies, so that
