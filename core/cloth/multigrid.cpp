@@ -425,8 +425,8 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
   solution_.resize(matrix_.size());
   residual_.resize(matrix_.size());
   for (size_t l = 0; l < matrix_.size(); ++l) {
-    rhs_[l].setZero(3 * matrix_[l].size);
-    solution_[l].setZero(3 * matrix_[l].size);
+    if (l > 0) rhs_[l].setZero(3 * matrix_[l].size);  // level 0's are apply's vectors
+    if (l > 0) solution_[l].setZero(3 * matrix_[l].size);
     residual_[l].setZero(3 * matrix_[l].size);
   }
 }
@@ -488,15 +488,12 @@ void Multigrid::update_smoother() {
 // ---- multigrid: the V-cycle
 
 void Multigrid::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
-  rhs_[0] = r;
-  cycle(0);
-  z = solution_[0];
+  z.resize(r.size());
+  cycle(0, r, z);
 }
 
-void Multigrid::cycle(int level) const {
+void Multigrid::cycle(int level, const Eigen::VectorXd& b, Eigen::VectorXd& x) const {
   const BlockMatrix& a = matrix_[level];
-  const Eigen::VectorXd& b = rhs_[level];
-  Eigen::VectorXd& x = solution_[level];
   if (level + 1 == static_cast<int>(matrix_.size())) {
     x = coarsest_.solve(b);
     return;
@@ -516,7 +513,7 @@ void Multigrid::cycle(int level) const {
     for (int e = p.start[i]; e < p.start[i + 1]; ++e) at(coarse_rhs, p.coarse[e]) += p.weight[e] * at(res, i);
   }
   // coarse correction: x += P x_c
-  cycle(level + 1);
+  cycle(level + 1, coarse_rhs, solution_[level + 1]);
   const Eigen::VectorXd& coarse_x = solution_[level + 1];
   for (int i = 0; i < a.size; ++i) {
     Vec3 s = Vec3::Zero();

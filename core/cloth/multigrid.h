@@ -168,12 +168,13 @@ class Multigrid final : public Preconditioner {
   std::vector<Recipe> right_, left_;          // (levels - 1) A P from A, then P^T (A P)
   std::vector<std::vector<double>> inverse_diagonal_;  // per level (9 blocks + 1) D^-1, 9 a block column-major, and a pad
   Eigen::LLT<Eigen::MatrixXd> coarsest_;      // dense Cholesky of the coarsest level
-  // V-cycle scratch per level: right-hand side, solution, residual
+  // V-cycle scratch per level: right-hand side and solution (from level 1), residual
   mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;
 
   static EdgeSmoother edge_smoother(const BlockMatrix& a, const std::vector<std::vector<int>>& graph);
   void update_smoother();
-  void cycle(int level) const;
+  // one V-cycle from `level` down: x = V b (level 0's b and x are apply's own vectors)
+  void cycle(int level, const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
 };
 
 }  // namespace simbake::cloth_detail
