@@ -99,6 +99,9 @@ constexpr int kCoarsestBlocks = 48;          // solve directly at or below this 
 constexpr int kMaxLevels = 16;
 constexpr double kSmoothingWeight = 2.0 / 3.0;  // w of P = (I - w D^-1 L) T
 constexpr double kLeastShrink = 0.8;         // stop when a level keeps more than this share
+// the finest smoother drops a non-edge block only where no row's diagonal grows by more than
+// this share of its smallest eigenvalue (see "The smoother")
+constexpr double kMaxSmootherDistortion = 0.5;
 
 using Graph = std::vector<std::vector<int>>;  // (blocks) sorted neighbours, no self
 
@@ -307,33 +310,6 @@ void BlockJacobi::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
 
 // ---- multigrid: the hierarchy (once per cloth)
 
-// The finest level's smoother's pattern (multigrid.h, EdgeSmoother): of a's lower triangle,
-// the blocks between neighbours in `graph` (sorted), then each row's diagonal
-Multigrid::EdgeSmoother Multigrid::edge_smoother(const BlockMatrix& a, const std::vector<std::vector<int>>& graph) {
-  EdgeSmoother s;
-  const LowerBlocks& lower = a.lower;
-  s.lower.start.assign(1, 0);
-  for (int i = 0; i < a.size; ++i) {
-    const int diagonal = lower.start[i + 1] - 1;
-    for (int k = lower.start[i]; k < diagonal; ++k) {
-      const int j = lower.column[k];
-      if (std::binary_search(graph[i].begin(), graph[i].end(), j)) {
-        s.lower.column.push_back(j);
-        s.kept.push_back(k);
-      } else {
-        s.dropped_row.push_back(i);
-        s.dropped_column.push_back(j);
-        s.dropped_block.push_back(lower.source[k]);
-      }
-    }
-    s.lower.column.push_back(i);
-    s.kept.push_back(-1);  // the diagonal: made each update
-    s.lower.start.push_back(static_cast<int>(s.lower.column.size()));
-  }
-  s.lower.block.assign(9 * s.lower.column.size() + 1, 0.0f);
-  return s;
-}
-
 Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vector<std::vector<int>>& edges,
                      const Eigen::VectorXd& scale) {
   const int n = static_cast<int>(pattern.cols() / 3);
@@ -345,7 +321,16 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
     row.erase(std::unique(row.begin(), row.end()), row.end());
   }
 
-  smoother_ = edge_smoother(matrix_[0], graph);
+  // which of level 0's lower blocks lie between mesh-edge neighbours (the smoother's)
+  {
+    const LowerBlocks& lower = matrix_[0].lower;
+    smoother_.edge.assign(lower.column.size(), 0);
+    for (int i = 0; i < n; ++i) {
+      for (int k = lower.start[i]; k + 1 < lower.start[i + 1]; ++k) {
+        smoother_.edge[k] = std::binary_search(graph[i].begin(), graph[i].end(), lower.column[k]) ? 1 : 0;
+      }
+    }
+  }
   // coarser levels while they pay
   while (matrix_.back().size > kCoarsestBlocks && static_cast<int>(matrix_.size()) < kMaxLevels) {
     const BlockMatrix& a = matrix_.back();
@@ -460,29 +445,64 @@ void Multigrid::update(const Eigen::SparseMatrix<double>& a) {
   coarsest_.compute(dense);
 }
 
-// The finest level's smoother from level 0's values: the kept blocks as they are (in single
-// precision already), each row's diagonal block plus the Frobenius norms (>= the spectral
-// norm) of the dropped blocks in its row and column, and the inverses of those diagonals
+// The finest level's smoother from level 0's values ("The smoother" above). A row i would
+// be distorted by dropping its non-edge blocks E_ij by about (sum_j |E_ij|) |D_i^-1| (the
+// diagonal's growth against its smallest eigenvalue; Frobenius norms, each >= the spectral
+// one): a block is dropped, and its norm added to the diagonals of its row and its column,
+// only where neither row would be distorted by more than kMaxSmootherDistortion; else kept.
+// Then the inverses of the compensated diagonals.
 void Multigrid::update_smoother() {
   const BlockMatrix& a = matrix_[0];
-  std::vector<double> added(a.size, 0.0);
-  for (size_t k = 0; k < smoother_.dropped_block.size(); ++k) {
-    const double norm = a.block[smoother_.dropped_block[k]].norm();
-    added[smoother_.dropped_row[k]] += norm;
-    added[smoother_.dropped_column[k]] += norm;
+  const LowerBlocks& full = a.lower;
+  EdgeSmoother& s = smoother_;
+  s.hinge.assign(a.size, 0.0);
+  s.added.assign(a.size, 0.0);
+  s.keep_row.resize(a.size);
+  const auto norm = [&](int k) { return a.block[full.source[k]].norm(); };
+  for (int i = 0; i < a.size; ++i) {
+    for (int k = full.start[i]; k + 1 < full.start[i + 1]; ++k) {
+      if (s.edge[k]) continue;
+      const double e = norm(k);
+      s.hinge[i] += e;
+      s.hinge[full.column[k]] += e;
+    }
   }
-  LowerBlocks& lower = smoother_.lower;
+  for (int i = 0; i < a.size; ++i) {
+    s.keep_row[i] = s.hinge[i] * a.block[a.diagonal[i]].inverse().norm() > kMaxSmootherDistortion;
+  }
+  LowerBlocks& lower = s.lower;
+  lower.start.assign(1, 0);
+  lower.column.clear();
+  lower.block.clear();
+  for (int i = 0; i < a.size; ++i) {
+    for (int k = full.start[i]; k + 1 < full.start[i + 1]; ++k) {
+      const int j = full.column[k];
+      if (s.edge[k] || s.keep_row[i] || s.keep_row[j]) {
+        lower.column.push_back(j);
+        lower.block.insert(lower.block.end(), full.block.begin() + 9 * k, full.block.begin() + 9 * k + 9);
+      } else {
+        const double e = norm(k);
+        s.added[i] += e;
+        s.added[j] += e;
+      }
+    }
+    lower.column.push_back(i);
+    lower.block.resize(lower.block.size() + 9);  // the diagonal, below
+    lower.start.push_back(static_cast<int>(lower.column.size()));
+  }
+  lower.block.push_back(0.0f);  // the pad the kernels read past the last block
   std::vector<double>& inverse = inverse_diagonal_[0];
   inverse.assign(9 * a.size + 1, 0.0);
   for (int i = 0; i < a.size; ++i) {
-    const int diagonal = lower.start[i + 1] - 1;
-    for (int k = lower.start[i]; k < diagonal; ++k) {
-      std::copy_n(a.lower.block.data() + 9 * smoother_.kept[k], 9, lower.block.data() + 9 * k);
-    }
-    const Mat3 d = a.block[a.diagonal[i]] + added[i] * Mat3::Identity();
-    for (int e = 0; e < 9; ++e) lower.block[9 * diagonal + e] = static_cast<float>(d.data()[e]);
+    const Mat3 d = a.block[a.diagonal[i]] + s.added[i] * Mat3::Identity();
+    float* slot = lower.block.data() + 9 * (lower.start[i + 1] - 1);
+    for (int e = 0; e < 9; ++e) slot[e] = static_cast<float>(d.data()[e]);
     Eigen::Map<Mat3>(inverse.data() + 9 * i) = d.inverse();
   }
+}
+
+int Multigrid::smoother_full_rows() const {
+  return static_cast<int>(std::count(smoother_.keep_row.begin(), smoother_.keep_row.end(), 1));
 }
 
 // ---- multigrid: the V-cycle

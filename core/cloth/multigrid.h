@@ -144,6 +144,10 @@ class Multigrid final : public Preconditioner {
   // the finest level's smoother (multigrid.cpp, "The smoother"): the system's lower triangle
   // between mesh-edge neighbours, the other blocks' norms added to the diagonal
   const LowerBlocks& smoother() const { return smoother_.lower; }
+  // rows of the last update whose smoother kept every block (their non-edge blocks would have
+  // distorted them), and the non-edge blocks it dropped
+  int smoother_full_rows() const;
+  int smoother_dropped() const { return static_cast<int>(matrix_[0].lower.column.size() - smoother_.lower.column.size()); }
   int level_size(int l) const { return matrix_[l].size; }  // block rows of level l (0 finest)
   const BlockMatrix& level(int l) const { return matrix_[l]; }  // the operator of level l
 
@@ -153,13 +157,16 @@ class Multigrid final : public Preconditioner {
     std::vector<int> from, to;
     std::vector<double> weight;
   };
-  // The finest level's smoother: the lower triangle's blocks between mesh-edge neighbours
-  // (copied from level 0's each update), the others (bending's, across hinges) dropped and
-  // their norms added to the diagonals of both their rows
+  // The finest level's smoother (multigrid.cpp, "The smoother"): level 0's lower triangle
+  // less the blocks between vertices that share no mesh edge (bending's, across hinges),
+  // each dropped where neither of its rows would be distorted by more than
+  // kMaxSmootherDistortion; their norms go to the diagonals. Its pattern is made anew each
+  // update, from the values
   struct EdgeSmoother {
-    LowerBlocks lower;                 // each row's edge neighbours j < i, then its diagonal
-    std::vector<int> kept;             // (off-diagonal entries) the entry of level 0's lower triangle each copies
-    std::vector<int> dropped_row, dropped_column, dropped_block;  // the other blocks (i, j < i); their block in level 0
+    LowerBlocks lower;                 // the kept blocks of each row, then its diagonal (compensated)
+    std::vector<char> edge;            // (level 0's lower entries) 1 where the two vertices share an edge
+    std::vector<char> keep_row;        // (blocks) scratch: the row keeps every block this update
+    std::vector<double> hinge, added;  // (blocks) scratch: the norms of a row's non-edge blocks; of those dropped
   };
   std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
   EdgeSmoother smoother_;
@@ -171,7 +178,6 @@ class Multigrid final : public Preconditioner {
   // V-cycle scratch per level: right-hand side and solution (from level 1), residual
   mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;
 
-  static EdgeSmoother edge_smoother(const BlockMatrix& a, const std::vector<std::vector<int>>& graph);
   void update_smoother();
   // one V-cycle from `level` down: x = V b (level 0's b and x are apply's own vectors)
   void cycle(int level, const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
