@@ -64,23 +64,28 @@
 //    and scatters the new x_i to the rows it precedes. Against full storage, with the
 //    sweeps and the residual each walking their rows, this reads 2 x 6 instead of 30 of the
 //    drape's 13 blocks a row per cycle at the finest level (2 x 3 with the smoother below).
-//  * The smoother. On the finest level the sweeps read only the blocks between mesh-edge
-//    neighbours: 3 of the 6 below the diagonal in a grid's row. The other 3 couple the two
-//    vertices across a hinge, through bending alone, two to four orders of magnitude below
-//    a spring's block (the drape at rest: 0.01 against 6-290 at 33 x 33, 2.6 against
-//    100-4,000 at 129 x 129; the diagonals 1,260 and 20,100). Each dropped block's norm is
-//    added to the diagonals of its row and its column (diagonal compensation), so that the
-//    smoother's matrix S satisfies u . S u >= u . A u (each dropped pair's part of S - A is
-//    [|E| I, -E; -E^T, |E| I], positive semi-definite): its Gauss-Seidel converges, and the
-//    cycle stays symmetric positive definite (the restriction takes S's residual, the
-//    coarse levels are Galerkin's of A). The conjugate gradients multiply by A itself, so
-//    the solve still meets its tolerance on the true system. Dropped without compensation,
-//    the drape's resting system took 36 iterations instead of 20 at 129 x 129; compensated,
-//    20-22 at 33, 65 and 129 as with every block (a prototype of this cycle on the bake's
-//    own systems), and the bake's iterations per step stay 18-20. The sweeps then read half
-//    the blocks: the drape's solve costs 0.80x at 33 x 33, 0.85x at 65 x 65 and 0.93x at
-//    129 x 129, where the vectors and the inverted diagonals are much of the traffic
-//    (medians of paired runs of benchmarks/cloth/run_simbake.py).
+//  * The smoother. On the finest level the sweeps read the blocks between mesh-edge
+//    neighbours, 3 of the 6 below the diagonal in a grid's row, and drop the other 3 where
+//    they are small. Those couple the two vertices across a hinge, through bending alone: on
+//    the drape at rest 0.01 against 6-290 for a spring's block and 1,260 for the diagonal
+//    at 33 x 33, 2.6 against 100-4,000 and 20,100 at 129 x 129. Each dropped block's norm
+//    is added to the diagonals of its row and its column (diagonal compensation), so that
+//    the smoother's matrix S satisfies u . S u >= u . A u (each dropped pair's part of
+//    S - A is [|E| I, -E; -E^T, |E| I], positive semi-definite): its Gauss-Seidel
+//    converges, and the cycle stays symmetric positive definite (the restriction takes S's
+//    residual, the coarse levels are Galerkin's of A). The conjugate gradients multiply by
+//    A itself, so the solve still meets its tolerance on the true system. The compensation
+//    makes S stiffer than A, most where bending is a large part of a diagonal's smallest
+//    eigenvalue (the out-of-plane one): its share there, (sum |E|) |D^-1|, averages 0.01 at
+//    33 x 33, 0.09 at 65, 0.3 at 129 and 0.65 at 257 on the resting drape. A row whose
+//    share would pass 0.5 keeps its blocks (every update decides, from the values):
+//    dropped everywhere, the drape took 21.6 iterations a step at 257 x 257 instead of
+//    18.05 and cost 2% more; kept where needed, 18.4. Dropped without any compensation, the
+//    resting system took 36 iterations instead of 20 at 129 x 129 (a prototype of this
+//    cycle on the bake's own systems). Reading half the blocks, the drape's whole step
+//    costs 0.86x at 33 x 33, 0.90x at 65 and 0.83x at 129 (medians of paired runs of
+//    benchmarks/cloth/run_simbake.py, the solve 0.80x, 0.85x and 0.77x), the iterations a
+//    step 18-20 as before.
 //    Everything runs in a fixed order on one thread, so the result has the same bits at any
 //    thread count.
 #include "cloth/multigrid.h"
