@@ -141,8 +141,9 @@ class Multigrid final : public Preconditioner {
   std::unique_ptr<Preconditioner> clone() const override { return std::make_unique<Multigrid>(*this); }
 
   int levels() const { return static_cast<int>(matrix_.size()); }
-  // the finest level's smoother (multigrid.cpp, "The smoother"): the system's lower triangle
-  // between mesh-edge neighbours, the other blocks' norms added to the diagonal
+  // the finest level's smoother as its sweeps read it (multigrid.cpp, "The smoother"): the
+  // system's lower triangle less the non-edge blocks the last update dropped, their norms
+  // added to the diagonals
   const LowerBlocks& smoother() const { return smoother_.lower; }
   // rows of the last update whose smoother kept every block (their non-edge blocks would have
   // distorted them), and the non-edge blocks it dropped
