@@ -77,15 +77,16 @@
 //    A itself, so the solve still meets its tolerance on the true system. The compensation
 //    makes S stiffer than A, most where bending is a large part of a diagonal's smallest
 //    eigenvalue (the out-of-plane one): its share there, (sum |E|) |D^-1|, averages 0.01 at
-//    33 x 33, 0.09 at 65, 0.3 at 129 and 0.65 at 257 on the resting drape. A row whose
+//    33 x 33, 0.09 at 65, 0.3 at 129 and 0.65 at 257 on the resting drape (a scratch
+//    build's print, not kept). A row whose
 //    share would pass 0.5 keeps its blocks (every update decides, from the values):
 //    dropped everywhere, the drape took 21.6 iterations a step at 257 x 257 instead of
 //    18.05 and cost 2% more; kept where needed, 18.4. Dropped without any compensation, the
-//    resting system took 36 iterations instead of 20 at 129 x 129 (a prototype of this
-//    cycle on the bake's own systems). Reading half the blocks, the drape's whole step
-//    costs 0.86x at 33 x 33, 0.90x at 65 and 0.83x at 129 (medians of paired runs of
-//    benchmarks/cloth/run_simbake.py, the solve 0.80x, 0.85x and 0.77x), the iterations a
-//    step 18-20 as before.
+//    resting system took 36 iterations instead of 20 at 129 x 129 (a scratch NumPy prototype
+//    of this cycle on systems dumped from the bake, not kept). Reading half the blocks, the drape's whole step
+//    costs 0.86x at 33 x 33, 0.90x at 65 and 0.83x at 129 (benchmarks/cloth/run_simbake.py N
+//    in turn with a checkout of 9dc27ec, the build before: medians of 6 and 3 pairs, one at
+//    129; the solve 0.80x, 0.85x and 0.77x), the iterations a step 18-20 as before.
 //    Everything runs in a fixed order on one thread, so the result has the same bits at any
 //    thread count.
 #include "cloth/multigrid.h"
@@ -270,13 +271,11 @@ void single_precision(BlockMatrix& m) {
   }
 }
 
-LowerView lower_view(const BlockMatrix& a) {
-  return {a.size, a.lower.start.data(), a.lower.column.data(), a.lower.block.data()};
-}
-
 LowerView lower_view(int size, const LowerBlocks& lower) {
   return {size, lower.start.data(), lower.column.data(), lower.block.data()};
 }
+
+LowerView lower_view(const BlockMatrix& a) { return lower_view(a.size, a.lower); }
 
 }  // namespace
 
@@ -415,8 +414,10 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
   solution_.resize(matrix_.size());
   residual_.resize(matrix_.size());
   for (size_t l = 0; l < matrix_.size(); ++l) {
-    if (l > 0) rhs_[l].setZero(3 * matrix_[l].size);  // level 0's are apply's vectors
-    if (l > 0) solution_[l].setZero(3 * matrix_[l].size);
+    if (l > 0) {  // level 0's are apply's vectors
+      rhs_[l].setZero(3 * matrix_[l].size);
+      solution_[l].setZero(3 * matrix_[l].size);
+    }
     residual_[l].setZero(3 * matrix_[l].size);
   }
 }
