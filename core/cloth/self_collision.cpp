@@ -141,7 +141,7 @@ void coplanarity_cubic(const Vec3 x[4], const Vec3 d[4], double coef[4]) {
 
 // Applies an impulse along the contact's normal that brings the pair's relative normal
 // velocity up to `target` (never down), with Coulomb friction on the relative slip limited
-// by the same change; returns whether it did anything. With `support` (repulsions: see
+// by the same change; returns whether it did anything. With `support` (see
 // SelfCollisionSettings::support), a vertex resting on a still surface (the normal of the
 // surfaces it rests on this step, or zero) that the impulse would push into that surface
 // takes none of it, as a pinned vertex: the surface holds it, and the pair's other vertices
@@ -1115,7 +1115,7 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
     collision_contacts(x, v, dt, settings, contacts, stats);
     if (contacts.empty()) return true;
     for (const Contact& c : contacts) {
-      stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass, /*support=*/nullptr);
+      stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass, settings.support);
     }
   }
   return false;
@@ -1132,7 +1132,7 @@ namespace {
 // infinite mass keep their own velocities.
 void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                   const Points* impulse, const std::vector<int>& obstacle_of, int cloth_vertices,
-                  const std::vector<ObstacleMotion>* motions) {
+                  const std::vector<ObstacleMotion>* motions, const std::vector<Vec3>* support) {
   int held_by = -1;       // the obstacle the zone holds, if one
   bool still = false;     // a pinned vertex, or two obstacles
   for (int i : zone) {
@@ -1172,7 +1172,14 @@ void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
   }
   // a zone on one line has no inertia about it: the pseudo-inverse leaves that spin out
   const Vec3 omega = inertia.completeOrthogonalDecomposition().solve(angular);
-  for (int i : zone) v.row(i) = (velocity + omega.cross(row(x, i) - center)).transpose();
+  const auto rigid = [&](int i) { return Vec3(velocity + omega.cross(row(x, i) - center)); };
+  // a zone whose motion would take a vertex into the still surface it rests on holds still
+  // instead: the surface holds it as a pin would
+  bool into_support = false;
+  if (support) {
+    for (int i : zone) into_support = into_support || rigid(i).dot((*support)[i]) < 0.0;
+  }
+  for (int i : zone) v.row(i) = (into_support ? Vec3::Zero() : rigid(i)).transpose();
 }
 
 }  // namespace
@@ -1191,7 +1198,7 @@ std::vector<std::vector<int>> SelfCollision::zone_members() const {
 void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                                const SelfCollisionSettings& settings, const Points& impulse) const {
   for (const std::vector<int>& zone : zone_members()) {
-    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion);
+    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support);
   }
 }
 
@@ -1236,7 +1243,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     for (const std::vector<int>& zone : zone_members()) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
-      move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_, settings.obstacle_motion);
+      move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support);
     }
   }
   // the last resort: the cloth does not move, and a cloth free of crossings stays free of them

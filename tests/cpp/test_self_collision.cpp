@@ -64,6 +64,18 @@ TEST(SelfCollision, PointStoppedAtATriangle) {
   EXPECT_NEAR(v(3, 1), under, 0.1);
 }
 
+// A triangle lying on the ground, y = 0 (vertices 0-2), and a point (vertex 3) `height` above
+// its centroid; each of unit mass
+struct PointOverGroundTriangle {
+  explicit PointOverGroundTriangle(double height) : x(4, 3), t(1, 3), inverse_mass(Eigen::VectorXd::Ones(4)) {
+    x << 0, 0, 0, 1, 0, 0, 0, 0, 1, 1.0 / 3, height, 1.0 / 3;
+    t << 0, 2, 1;
+  }
+  Points x;
+  Triangles t;
+  Eigen::VectorXd inverse_mass;
+};
+
 TEST(SelfCollision, ARepulsionLeavesAVertexOnItsSupport) {
   // a triangle lying on the ground (its vertices' support: the ground's normal, +y) and a
   // point 2 mm above its middle coming down at 1 m/s, inside the 5 mm thickness: the
@@ -71,11 +83,11 @@ TEST(SelfCollision, ARepulsionLeavesAVertexOnItsSupport) {
   // the triangle takes half the change (equal masses, weights 1 and 1/3 x 3): pushed down,
   // into the ground. Supported, it keeps its velocity and the point takes the whole change
   const double h = 0.005, dt = 0.01, d = 0.002;
-  Points x(4, 3), v(4, 3);
-  x << 0, 0, 0, 1, 0, 0, 0, 0, 1, 1.0 / 3, d, 1.0 / 3;
-  Triangles t(1, 3);
-  t << 0, 2, 1;
-  const Eigen::VectorXd inverse_mass = Eigen::VectorXd::Ones(4);
+  const PointOverGroundTriangle scene(d);
+  const Points& x = scene.x;
+  const Triangles& t = scene.t;
+  const Eigen::VectorXd& inverse_mass = scene.inverse_mass;
+  Points v(4, 3);
   const double target = 0.1 * (h - d) / dt;  // the relative normal velocity a repulsion sets
   for (const bool supported : {false, true}) {
     v.setZero();
@@ -97,6 +109,50 @@ TEST(SelfCollision, ARepulsionLeavesAVertexOnItsSupport) {
       // the change shared by inverse mass x weight: denominator 1 + 3 (1/3)^2 = 4/3
       EXPECT_NEAR(under, -(target + 1.0) / (4.0 / 3.0) / 3, 1e-12);
       EXPECT_LT(under, 0.0);
+    }
+  }
+}
+
+TEST(SelfCollision, ImpulsesAndZonesLeaveAVertexOnItsSupport) {
+  // the same triangle on the ground, the point 2 mm above it now falling at 1 m/s through it
+  // within the step (10 mm). The collision impulse (continuous detection) of a supported
+  // triangle leaves it still, the point alone reversed; an impact zone of the four, whose
+  // rigid motion keeps their momentum (all four down at 1/4 m/s), would take the triangle
+  // into the ground: supported, the zone holds still instead
+  const double dt = 0.01;
+  const PointOverGroundTriangle ground(0.002);
+  Points v(4, 3);
+  for (const bool supported : {false, true}) {
+    std::vector<Vec3> support(4, Vec3::Zero());
+    if (supported) support[0] = support[1] = support[2] = Vec3(0.0, 1.0, 0.0);
+    SelfCollisionSettings settings{0.005, 0.0};
+    settings.support = &support;
+    SelfCollisionStatistics stats;
+    {
+      v.setZero();
+      v(3, 1) = -1.0;
+      SelfCollision self(ground.t, 4);
+      EXPECT_FALSE(self.collide(ground.x, v, ground.inverse_mass, dt, settings, stats, 1));
+      EXPECT_EQ(stats.collisions, 1);
+      const double under = (v(0, 1) + v(1, 1) + v(2, 1)) / 3;
+      EXPECT_GT(v(3, 1), under);  // the approach reversed
+      if (supported) {
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(v.row(k).norm(), 0.0) << k;
+      } else {
+        EXPECT_LT(under, 0.0);
+      }
+    }
+    {
+      v.setZero();
+      v(3, 1) = -1.0;
+      SelfCollision self(ground.t, 4);
+      self.impact_zones(ground.x, v, ground.inverse_mass, dt, settings, stats);
+      EXPECT_GE(stats.zone_rounds, 1);
+      for (int k = 0; k < 4; ++k) {
+        EXPECT_NEAR(v(k, 1), supported ? 0.0 : -0.25, 1e-12) << k << " " << supported;
+        EXPECT_NEAR(v(k, 0), 0.0, 1e-12);
+        EXPECT_NEAR(v(k, 2), 0.0, 1e-12);
+      }
     }
   }
 }
