@@ -20,6 +20,7 @@ namespace {
 constexpr double kRepulsionRate = 0.1;      // a pair closer than h separates by 0.1 (h - d) per step at most
 constexpr double kCollisionTolerance = 1e-2; // of h: coplanar pairs this close count as colliding
 constexpr double kSeparation = 1e-3;        // of h per step: the separating speed a collision impulse leaves
+constexpr double kMaxHeldAmplification = 4.0;  // see apply_impulse
 constexpr double kMargin = 0.1;             // of the mean edge: how far a vertex's box reaches past
                                             // its start and end of the step
 constexpr size_t kMovedFraction = 8;       // all pairs are found again when more than 1 / 8 of the vertices
@@ -156,13 +157,27 @@ bool apply_impulse(const SelfCollision::Contact& c, double target, double fricti
   // each vertex's share of the change moves it along weight x normal: into its support if
   // that points against the support's normal
   double mass[4], denom = 0.0;
+  bool held = false;
   for (int k = 0; k < 4; ++k) {
     const int i = c.vertex[k];
     mass[k] = inverse_mass[i];
-    if (support && c.weight[k] * c.normal.dot((*support)[i]) < 0.0) mass[k] = 0.0;
+    if (support && c.weight[k] * c.normal.dot((*support)[i]) < 0.0 && mass[k] > 0.0) {
+      mass[k] = 0.0;
+      held = true;
+    }
     denom += c.weight[k] * c.weight[k] * mass[k];
   }
   if (denom <= 0.0) return false;
+  // vertex k's velocity changes by |w_k| m_k / denom times the wanted change: with the held
+  // vertices out, a pair left with one free vertex of small weight (a triangle's far corner)
+  // would fling it (1 / w_k; on the ploughed sheet one repulsion put a vertex at 94 m/s and
+  // the next steps at 1.7e5). Such a pair is left as one whose vertices are all held: to
+  // the next passes and the impact zones
+  if (held) {
+    for (int k = 0; k < 4; ++k) {
+      if (std::abs(c.weight[k]) * mass[k] > kMaxHeldAmplification * denom) return false;
+    }
+  }
   Vec3 delta = change * c.normal;  // the wanted change of the relative velocity
   const Vec3 slip = relative - vn * c.normal;
   const double slip_speed = slip.norm();

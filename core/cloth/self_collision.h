@@ -119,7 +119,8 @@ struct SelfCollisionSettings {
   // body), the normal of that surface (any length), else zero. An impulse (a repulsion or a
   // collision) that would push such a vertex into its surface leaves it where it is and
   // moves the pair's other vertices instead: the surface holds it, as a pin would; a pair
-  // whose vertices are all held so is left to the impact zones. An impact zone whose rigid
+  // whose vertices are all held so, or whose free ones would move by more than 4x the
+  // change (a light corner left alone), is left to the impact zones. An impact zone whose rigid
   // motion would take one of its vertices into its surface holds still. Without this, layers
   // landing on the heap shared their impulses with its bottom layer as if nothing were under
   // it, and self-collision, which has the last word in a step, ended steps with a vertex up

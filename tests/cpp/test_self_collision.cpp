@@ -157,6 +157,37 @@ TEST(SelfCollision, ImpulsesAndZonesLeaveAVertexOnItsSupport) {
   }
 }
 
+TEST(SelfCollision, AHeldPairLeftWithOneLightCornerIsNotFlung) {
+  // the point 2 mm over the triangle, both held against the repulsion's push (the triangle's
+  // vertices 0 and 1 by the ground under them, the point by a still surface over it): the
+  // triangle's vertex 2 alone can take the change, by 1 / w_2 times it. Over the triangle's
+  // far side (w_2 = 0.01) that would fling it at 100x the change: the repulsion is left
+  // out. Over its middle (w_2 = 0.6) vertex 2 takes it all, 1 / 0.6 times
+  const double h = 0.005, dt = 0.01, d = 0.002;
+  const double target = 0.1 * (h - d) / dt;
+  PointOverGroundTriangle scene(d);
+  std::vector<Vec3> support(4, Vec3::Zero());
+  support[0] = support[1] = Vec3(0.0, 1.0, 0.0);
+  support[3] = Vec3(0.0, -1.0, 0.0);
+  SelfCollisionSettings settings{h, 0.0};
+  settings.support = &support;
+  for (const double w2 : {0.01, 0.6}) {
+    scene.x.row(3) << 0.2, d, w2;  // barycentric weight of vertex 2 (0, 0, 1): its z
+    Points v = Points::Zero(4, 3);
+    SelfCollision self(scene.t, 4);
+    SelfCollisionStatistics stats;
+    self.repel(scene.x, v, scene.inverse_mass, dt, settings, stats);
+    for (const int k : {0, 1, 3}) EXPECT_EQ(v.row(k).norm(), 0.0) << k;
+    if (w2 < 0.25) {
+      EXPECT_EQ(stats.repulsions, 0);
+      EXPECT_EQ(v.row(2).norm(), 0.0);
+    } else {
+      EXPECT_EQ(stats.repulsions, 1);
+      EXPECT_NEAR(v(2, 1), -target / w2, 1e-12);
+    }
+  }
+}
+
 TEST(SelfCollision, CrossingEdgesStopped) {
   // edge (0, 1) along x at y = 0.05 falls through edge (2, 3) along z at y = 0 in one step
   Points x(6, 3), v(6, 3);
