@@ -184,8 +184,12 @@ void TriangleGrid::build(const Points& x, const Triangles& triangles, double cel
   for (int t = 0; t < triangles.rows(); ++t) {
     Box3 box;
     for (int v = 0; v < 3; ++v) box.extend(Vec3(x.row(triangles(t, v)).transpose()));
-    const Vec3 lo = box.min().array() - margin, hi = box.max().array() + margin;
+    Vec3 lo = box.min().array() - margin, hi = box.max().array() + margin;
     if (!Box3(lo, hi).intersects(region)) continue;
+    // only the cells a query can read: those of points in the region (a triangle stretched
+    // far across it, by a vertex flung out of a bad step, would list cells without bound)
+    lo = lo.cwiseMax(region.min() - Vec3::Constant(cell));
+    hi = hi.cwiseMin(region.max() + Vec3::Constant(cell));
     for (double gx = std::floor(lo.x() / cell) * cell; gx <= hi.x(); gx += cell) {
       for (double gy = std::floor(lo.y() / cell) * cell; gy <= hi.y(); gy += cell) {
         for (double gz = std::floor(lo.z() / cell) * cell; gz <= hi.z(); gz += cell) {

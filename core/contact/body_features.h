@@ -90,7 +90,8 @@ bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, cons
 // a point. Entries are sorted by (cell, triangle), so queries list triangles in index order.
 class TriangleGrid {
  public:
-  // the triangles (at positions x) whose box grown by `margin` meets `region`
+  // the triangles (at positions x) whose box grown by `margin` meets `region`; queries only
+  // of points in `region`
   void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region);
   // the triangles whose grown box's cells include p's cell, in increasing order
   void query(const Vec3& p, std::vector<int>& out) const;
