@@ -452,8 +452,10 @@ ClothModel::ClothModel(const ClothDesc& desc)
     pinned[p] = 1;
   }
   free_index.assign(n, -1);
+  inverse_mass = Eigen::VectorXd::Zero(n);
   for (int v = 0; v < n; ++v) {
     if (!pinned[v]) free_index[v] = free_count++;
+    if (!pinned[v]) inverse_mass[v] = 1.0 / mass[v];
   }
 
   forces = std::make_shared<const cloth_detail::ForceModel>(desc.rest, desc.triangles, desc.material);
@@ -655,10 +657,6 @@ bool Cloth::uses_multigrid() const {
 // the impulse along it that puts its candidate length x + dt v exactly at the target,
 // equal and opposite, shared by the inverse masses. Returns the largest correction made
 // (relative to the rest length).
-double Cloth::inverse_mass(int k, const std::vector<char>* held) const {
-  return model_->pinned[k] || (held && (*held)[k]) ? 0.0 : 1.0 / model_->mass[k];
-}
-
 double Cloth::strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held, Points* reaction) {
   const std::vector<cloth_detail::Edge>& edges = model_->forces->edges();
   const double limit = model_->material.strain_limit;

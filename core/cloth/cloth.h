@@ -105,7 +105,9 @@ class Cloth {
   // the pinned ones; a held or pinned vertex's inverse mass is 0. With `reaction` (n x 3),
   // the impulses each edge would have given its held (not pinned) end are summed there
   void limit_strain(double dt, bool global, const std::vector<char>* held, Points* reaction);
-  double inverse_mass(int k, const std::vector<char>* held) const;
+  double inverse_mass(int k, const std::vector<char>* held) const {
+    return held && (*held)[k] ? 0.0 : model_->inverse_mass[k];
+  }
   double strain_sweep(double dt, const std::vector<int>& order, const std::vector<char>* held, Points* reaction);
   void project_strain(double dt, const std::vector<char>* held, Points* reaction);
   // the sum of the squared distances by which the edges are past their bounds at candidate

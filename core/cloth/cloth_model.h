@@ -58,6 +58,7 @@ struct ClothModel {
   Triangles triangles;           // (m x 3)
   Eigen::VectorXd mass;          // (n) lumped masses (kg)
   std::vector<char> pinned;      // (n) 1 if pinned
+  Eigen::VectorXd inverse_mass;  // (n) 1 / mass, 0 where pinned (the strain limiter's weights)
   std::vector<int> free_index;   // vertex -> its block in the implicit system, -1 if pinned
   int free_count = 0;
   // edges, hinges, membrane rest frames and the element forces
