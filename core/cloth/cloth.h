@@ -76,6 +76,7 @@ class Cloth {
   const Triangles& triangles() const { return model_->triangles; }
   const Eigen::VectorXd& masses() const { return model_->mass; }      // (n) lumped masses (kg)
   const std::vector<char>& pinned() const { return model_->pinned; }  // (n) 1 if pinned
+  const Eigen::VectorXd& inverse_masses() const { return model_->inverse_mass; }  // (n) 1 / mass, 0 if pinned
   Points& positions() { return x_; }                            // (n x 3) (m)
   const Points& positions() const { return x_; }
   Points& velocities() { return v_; }                           // (n x 3) (m/s)

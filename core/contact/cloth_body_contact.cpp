@@ -61,10 +61,7 @@ bool out_of_reach(const ContactBody& body, const Box3& reach, double h) {
 
 ClothBodyContact::ClothBodyContact(const Cloth& cloth, double friction, double thickness)
     : friction_(friction), thickness_(thickness) {
-  inverse_mass_ = cloth.masses().cwiseInverse();
-  for (int k = 0; k < cloth.vertex_count(); ++k) {
-    if (cloth.pinned()[k]) inverse_mass_[k] = 0.0;
-  }
+  inverse_mass_ = cloth.inverse_masses();
   edges_ = unique_edges(cloth.triangles());  // sorted
   const Triangles& triangles = cloth.triangles();
   triangle_edges_.resize(triangles.rows());
