@@ -464,11 +464,11 @@ void Multigrid::update_smoother() {
   s.hinge.assign(a.size, 0.0);
   s.added.assign(a.size, 0.0);
   s.keep_row.resize(a.size);
-  const auto norm = [&](int k) { return a.block[full.source[k]].norm(); };
+  s.norm.resize(full.column.size());
   for (int i = 0; i < a.size; ++i) {
     for (int k = full.start[i]; k + 1 < full.start[i + 1]; ++k) {
       if (s.edge[k]) continue;
-      const double e = norm(k);
+      const double e = s.norm[k] = a.block[full.source[k]].norm();
       s.hinge[i] += e;
       s.hinge[full.column[k]] += e;
     }
@@ -487,9 +487,8 @@ void Multigrid::update_smoother() {
         lower.column.push_back(j);
         lower.block.insert(lower.block.end(), full.block.begin() + 9 * k, full.block.begin() + 9 * k + 9);
       } else {
-        const double e = norm(k);
-        s.added[i] += e;
-        s.added[j] += e;
+        s.added[i] += s.norm[k];
+        s.added[j] += s.norm[k];
       }
     }
     lower.column.push_back(i);

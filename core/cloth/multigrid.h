@@ -168,6 +168,7 @@ class Multigrid final : public Preconditioner {
     std::vector<char> edge;            // (level 0's lower entries) 1 where the two vertices share an edge
     std::vector<char> keep_row;        // (blocks) scratch: the row keeps every block this update
     std::vector<double> hinge, added;  // (blocks) scratch: the norms of a row's non-edge blocks; of those dropped
+    std::vector<double> norm;          // (level 0's lower entries) scratch: each non-edge block's norm
   };
   std::vector<BlockMatrix> matrix_;           // (levels) the operators, 0 finest
   EdgeSmoother smoother_;
