@@ -64,7 +64,8 @@ def _print_scene_warnings(scene) -> None:
 
 
 def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
-          shot: str | None = None, instancing: str = "auto", clips: int | None = None) -> int:
+          shot: str | None = None, instancing: str = "auto", clips: int | None = None,
+          threads: int = 0) -> int:
     from .scene import load_scene
 
     scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
@@ -74,7 +75,7 @@ def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = Fals
     output = output or _default_output(scene_path, scene)
     bar, update = _progress(not quiet)
     try:
-        stats = bake(scene, output, on_frame=update, instancing=instancing, clips=clips,
+        stats = bake(scene, output, on_frame=update, instancing=instancing, clips=clips, threads=threads,
                      **({"shot": shot} if shot else {}))
     finally:
         if bar is not None:
@@ -159,6 +160,8 @@ def parser() -> argparse.ArgumentParser:
                    help="TOML scenes: bodies sharing one shape as a PointInstancer: auto (from 100 bodies), always, never")
     b.add_argument("--clips", type=int, default=None, metavar="N",
                    help="write frames into value-clip layers of N frames each in OUT.clips/, stitched by OUT")
+    b.add_argument("--threads", type=int, default=0, metavar="N",
+                   help="worker threads of the solver (default 0: every CPU); the cache is the same at any count")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     b.add_argument("--preview", action="store_true",
                    help="also write CACHE.mp4 (simbake preview) and CACHE.report.html (simbake report)")
@@ -193,7 +196,8 @@ def _main(argv: list[str] | None) -> int:
     args = parser().parse_args(argv)
     try:
         if args.command == "bake":
-            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing, args.clips)
+            return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing, args.clips,
+                         args.threads)
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":

@@ -30,6 +30,7 @@ from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
 USD_SUFFIXES = (".usdc", ".usda", ".usd")
 INSTANCING_MODES = ("auto", "always", "never")
 INSTANCING_AUTO = 100  # bodies sharing one shape from which "auto" writes a PointInstancer
+MAX_THREADS = 1024     # --threads: more than any machine this runs on
 
 
 @dataclass
@@ -325,7 +326,8 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
 
 def bake(scene: Scene, output: str | Path, *,
          on_frame: Callable[[int, int], None] | None = None, qa: bool = True,
-         shot: str | Path | None = None, instancing: str = "auto", clips: int | None = None) -> BakeStats:
+         shot: str | Path | None = None, instancing: str = "auto", clips: int | None = None,
+         threads: int = 0) -> BakeStats:
     """Simulate the scene and stream its USD cache to `output` (appears only when complete).
 
     on_frame(done, total) is called after each written frame (for progress bars). With `qa`
@@ -336,7 +338,8 @@ def bake(scene: Scene, output: str | Path, *,
     (TOML scenes only: a shot's cache overrides the input's own prims; see instancer_groups).
     `clips` N: value-clip layers of N frames each in OUTPUT_STEM.clips/, stitched by the
     output (simbake.usd_clips). Every .vdb the bake used is copied into OUTPUT_STEM.vdb/ and
-    shown as a guide Volume under its body.
+    shown as a guide Volume under its body. `threads`: the core's worker threads (0: every
+    CPU); the cache is the same bits at any count.
     """
     output = Path(output)
     check_scene(scene)  # a Scene made in Python (or from USD) meets the same range as a file's
@@ -347,13 +350,15 @@ def bake(scene: Scene, output: str | Path, *,
     if clips is not None:
         if isinstance(clips, bool) or not isinstance(clips, int) or clips < 1:
             raise SceneError(scene.source, "--clips", f"must be a whole number of frames >= 1, got {clips!r}")
+    if isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= MAX_THREADS:
+        raise SceneError(scene.source, "--threads", f"must be a whole number in [0, {MAX_THREADS}], got {threads!r}")
     shot = Path(shot) if shot is not None else None
     if scene.shot is not None or shot is not None:
         _check_shot_outputs(scene, output, shot)
     start = time.perf_counter()
     assets = load_assets(scene)
     cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
-    world = build_world(scene, assets, cloths)
+    world = build_world(scene, assets, cloths, threads=threads)
     check_budget(scene, output, scene.substeps or world.automatic_substeps(1.0 / scene.fps),
                  sum(_moves(body) for body in scene.bodies), [len(c.vertices) for c in cloths])
     try:

@@ -445,3 +445,30 @@ def test_outputs_respect_the_umask(write_scene, meshes, tmp_path, command):
     result = simbake(*args, cwd=tmp_path, preexec_fn=lambda: os.umask(0o022))
     assert result.returncode == 0, result.stderr
     assert (tmp_path / out).stat().st_mode & 0o777 == 0o644
+
+
+# --------------------------------------------------------------------------------------------
+# simbake bake --threads
+# --------------------------------------------------------------------------------------------
+
+def test_threads_option_gives_the_same_cache_at_any_count(write_scene, tmp_path):
+    from pxr import Usd
+
+    write_scene(DROP_SCENE)
+    for threads in (1, 2):
+        result = simbake("bake", "scene.toml", "-o", f"t{threads}.usda", "--threads", threads, cwd=tmp_path)
+        assert result.returncode == 0, result.stderr
+    samples = []
+    for threads in (1, 2):
+        stage = Usd.Stage.Open(str(tmp_path / f"t{threads}.usda"))
+        attribute = stage.GetPrimAtPath("/World/ball").GetAttribute("xformOp:translate")
+        samples.append([tuple(attribute.Get(t)) for t in attribute.GetTimeSamples()])
+    assert len(samples[0]) == 12 and samples[0] == samples[1]
+
+
+@pytest.mark.parametrize("value", ["-1", "100000"])
+def test_threads_option_out_of_range(write_scene, tmp_path, value):
+    write_scene(DROP_SCENE)
+    line = assert_one_line_error(simbake("bake", "scene.toml", "-o", "out.usdc", "--threads", value, cwd=tmp_path))
+    assert "--threads" in line and value in line
+    assert listing(tmp_path) == ["scene.toml"]
