@@ -16,7 +16,7 @@ export CMAKE_BUILD_PARALLEL_LEVEL ?= 2
 SYSTEM_PACKAGES := g++ make libopenvdb-dev libeigen3-dev libtbb-dev libboost-iostreams-dev libgtest-dev \
   libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri
 BUILD_REQUIRES := "scikit-build-core>=0.10" "pybind11>=2.12" "cmake>=3.18" ninja
-SOURCES := $(shell find core bindings -name '*.cpp' -o -name '*.h') $(wildcard tests/cpp/*) CMakeLists.txt pyproject.toml
+SOURCES := $(shell find core bindings tests/cpp -name '*.cpp' -o -name '*.h') CMakeLists.txt pyproject.toml
 
 .PHONY: demo test bench install system clean
 

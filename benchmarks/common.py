@@ -121,18 +121,24 @@ def vec(*values: float) -> np.ndarray:
     return np.array(values, dtype=np.float64)
 
 
+def body_state(world: "_core.World", i: int) -> dict:
+    """Body i's state (center_of_mass, orientation, linear_velocity, ...), from the world's arrays."""
+    return {key: values[i] for key, values in world.body_states().items()}
+
+
 def add_sphere(world: "_core.World", radius: float, mass: float, position, **kwargs) -> int:
     vertices, _ = _core.sphere_mesh(radius, SPHERE_SUBDIVISIONS)
-    return world.add_body(_core.LevelSet.sphere(radius), vertices, _core.sphere_mass_properties(radius),
-                          mass, np.asarray(position, dtype=float), IDENTITY, **kwargs)
+    return world.add_body(shape=_core.LevelSet.sphere(radius), samples=vertices,
+                          mass_properties=_core.sphere_mass_properties(radius), mass=mass,
+                          origin=np.asarray(position, dtype=float), orientation=IDENTITY, **kwargs)
 
 
 def add_box(world: "_core.World", size, mass: float, position, with_shape: bool = True, **kwargs) -> int:
     size = np.asarray(size, dtype=float)
     vertices, _ = _core.box_mesh(size, BOX_SUBDIVISIONS)
     shape = _core.LevelSet.box(size) if with_shape else None
-    return world.add_body(shape, vertices, _core.box_mass_properties(size), mass,
-                          np.asarray(position, dtype=float), IDENTITY, **kwargs)
+    return world.add_body(shape=shape, samples=vertices, mass_properties=_core.box_mass_properties(size),
+                          mass=mass, origin=np.asarray(position, dtype=float), orientation=IDENTITY, **kwargs)
 
 
 def frame_substeps(world: "_core.World", substeps: int, frame_dt: float = 1.0 / FPS) -> int:

@@ -39,7 +39,7 @@ ENVELOPE_H0 = [H0 + 0.025 * i for i in range(8)]  # spans one impact phase at 1 
 
 def make_world(h0: float = H0) -> "_core.World":
     world = _core.World(gravity=common.vec(0.0, -G, 0.0))
-    world.set_ground(0.0, 0.0, 0.0)
+    world.set_ground(height=0.0, friction=0.0, restitution=0.0)
     common.add_sphere(world, RADIUS, MASS, (0.0, h0 + RADIUS, 0.0), friction=0.0, restitution=E)
     return world
 
@@ -49,7 +49,7 @@ def measure(substeps: int, h0: float = H0) -> dict:
     reference = [r * h0 / H0 for r in REFERENCE]
     sampled, ballistic, times, counts = [], [], [], []
     t = 0.0
-    state = world.body_state(0)
+    state = common.body_state(world, 0)
     y_prev, v_prev = state["center_of_mass"][1], state["linear_velocity"][1]
     for _ in range(FRAMES):
         n = common.frame_substeps(world, substeps)
@@ -58,7 +58,7 @@ def measure(substeps: int, h0: float = H0) -> dict:
         for _ in range(n):
             world.step(dt)
             t += dt
-            state = world.body_state(0)
+            state = common.body_state(world, 0)
             y, v = state["center_of_mass"][1], state["linear_velocity"][1]
             if v_prev > 0.0 and v <= 0.0 and len(sampled) < APEXES:
                 sampled.append(max(y_prev, y) - RADIUS)

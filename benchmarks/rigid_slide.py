@@ -34,7 +34,7 @@ MU_STICK, STICK_SECONDS = 0.7, 3.0
 
 def make_world(mu: float) -> "_core.World":
     world = _core.World(gravity=common.vec(G * math.sin(ANGLE), -G * math.cos(ANGLE), 0.0))
-    world.set_ground(0.0, mu, 0.0)
+    world.set_ground(height=0.0, friction=mu, restitution=0.0)
     common.add_box(world, SIZE, MASS, (0.0, 0.5 * SIZE[1], 0.0), friction=mu, restitution=0.0)
     return world
 
@@ -48,11 +48,11 @@ def simulate(mu: float, substeps: int, seconds: float) -> dict:
     """Positions and velocities at every frame boundary."""
     world = make_world(mu)
     frames = int(round(seconds * FPS))
-    s = world.body_state(0)
+    s = common.body_state(world, 0)
     x, v, q, counts = [s["center_of_mass"]], [s["linear_velocity"]], [s["orientation"]], []
     for _ in range(frames):
         counts.append(world.step_frame(1.0 / FPS, substeps))
-        s = world.body_state(0)
+        s = common.body_state(world, 0)
         x.append(s["center_of_mass"]), v.append(s["linear_velocity"]), q.append(s["orientation"])
     return {"x": np.array(x), "v": np.array(v), "q": np.array(q), "counts": counts,
             "impulses_per_substep": world.statistics()["impulses"] / sum(counts),

@@ -16,7 +16,7 @@ Measured per substep count (fixed and automatic), by stepping with World.step(dt
 - the largest relative drift of the kinetic energy 1/2 L.omega from the state;
 - the angular momentum measured independently of the state's L, from the realized rotation:
   omega_avg = rotation vector of q_{n+1} q_n^-1 / dt, L = R I R^T omega_avg with R at the
-  midpoint orientation (q from body_state()["orientation"], the principal frame); its largest
+  midpoint orientation (q from body_states()["orientation"], the principal frame); its largest
   relative deviation from I omega_0, and the energy 1/2 omega_avg.L of the same;
 - the time of the first flip (the body-frame angular momentum along the intermediate axis
   changes sign), against two references: an RK4 solution of Euler's equations with
@@ -68,7 +68,7 @@ def simulate(substeps: int, omega0=OMEGA0) -> dict:
     """Step with World.step(dt) and record the state after every step."""
     world = make_world(omega0)
     times, steps, quats, momenta, omegas = [0.0], [], [], [], []
-    s = world.body_state(0)
+    s = common.body_state(world, 0)
     quats.append(s["orientation"]), momenta.append(s["angular_momentum"]), omegas.append(s["angular_velocity"])
     t, counts = 0.0, []
     for _ in range(FRAMES):
@@ -78,7 +78,7 @@ def simulate(substeps: int, omega0=OMEGA0) -> dict:
         for _ in range(n):
             world.step(dt)
             t += dt
-            s = world.body_state(0)
+            s = common.body_state(world, 0)
             times.append(t), steps.append(dt)
             quats.append(s["orientation"]), momenta.append(s["angular_momentum"]), omegas.append(s["angular_velocity"])
     return {"times": np.array(times), "dt": np.array(steps), "q": np.array(quats),
@@ -151,7 +151,7 @@ def euler_flip_time(omega_body: np.ndarray, dt: float, t_max: float = DURATION) 
 
 
 def body_frame_omega(omega0) -> np.ndarray:
-    q = make_world(omega0).body_state(0)["orientation"]
+    q = common.body_state(make_world(omega0), 0)["orientation"]
     return common.quat_to_matrix(q).T @ np.asarray(omega0, dtype=float)
 
 

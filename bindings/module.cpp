@@ -1,8 +1,11 @@
 // simbake._core: a thin layer over the C++ core. Converts numpy arrays to Eigen and back,
 // releases the GIL while the world steps, and turns C++ exceptions into Python ones
 // (std::invalid_argument -> ValueError, std::runtime_error -> RuntimeError). No physics here.
-// Every index and number a method takes is checked here before it reaches the core (which
-// trusts its callers): a bad index is IndexError, a bad number ValueError, never a crash.
+// Every index and number a method takes is checked here or by the core before it is used: a
+// bad index is IndexError, a bad number ValueError, never a crash. The settings and the
+// descriptions of bodies and cloths are the core's structs, constructed by keyword: their C++
+// defaults are the only defaults (pipeline/simbake/_core.pyi lists them for readers).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -17,6 +20,7 @@
 #include "geometry/triangle_intersection.h"
 #include "levelset/vdb_levelset.h"
 #include "world/quality.h"
+#include "world/stages.h"
 #include "world/world.h"
 
 namespace py = pybind11;
@@ -83,9 +87,21 @@ const Vec3& positive(const Vec3& v, const char* name) {
 
 Quat quat_wxyz(const Eigen::Vector4d& q) { return Quat(q[0], q[1], q[2], q[3]); }
 
+// An enum's names (the strings Python passes and reads), e.g. kModels
+template <class Enum>
+using Names = std::initializer_list<std::pair<const char*, Enum>>;
+
+const Names<InPlaneModel> kModels = {{"springs", InPlaneModel::kSprings}, {"membrane", InPlaneModel::kMembrane}};
+const Names<CompressionMode> kCompressions = {
+    {"subgrid", CompressionMode::kSubgrid}, {"enforce", CompressionMode::kEnforce}, {"none", CompressionMode::kNone}};
+const Names<ClothIntegrator> kIntegrators = {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}};
+const Names<ClothPreconditioner> kPreconditioners = {{"automatic", ClothPreconditioner::kAutomatic},
+                                                     {"block_jacobi", ClothPreconditioner::kBlockJacobi},
+                                                     {"multigrid", ClothPreconditioner::kMultigrid}};
+
 // The enum value named by `name`, or ValueError listing the choices
 template <class Enum>
-Enum choose(const std::string& name, std::initializer_list<std::pair<const char*, Enum>> choices) {
+Enum choose(const std::string& name, Names<Enum> choices) {
   std::string names;
   for (const auto& [key, value] : choices) {
     if (name == key) return value;
@@ -94,13 +110,78 @@ Enum choose(const std::string& name, std::initializer_list<std::pair<const char*
   throw std::invalid_argument("unknown choice '" + name + "' (choose " + names + ")");
 }
 
+template <class Enum>
+std::string name_of(Enum value, Names<Enum> choices) {
+  for (const auto& [key, choice] : choices) {
+    if (choice == value) return key;
+  }
+  return "";
+}
+
+// A struct field bound as a string property: `field(object)` is the enum it reads and writes
+template <class T, class Field, class Enum>
+void enum_field(py::class_<T>& cls, const char* name, Field field, Names<Enum> choices) {
+  cls.def_property(name, [field, choices](T& self) { return name_of(field(self), choices); },
+                   [field, choices](T& self, const std::string& value) { field(self) = choose(value, choices); });
+}
+
+// The fields of a bound struct: its properties, in the order they were bound
+std::vector<std::string> field_names(const py::handle& type) {
+  const py::object property = py::module_::import("builtins").attr("property");
+  std::vector<std::string> names;
+  // (a type's __dict__ is a mapping proxy, in definition order)
+  for (const py::handle item : type.attr("__dict__").attr("items")()) {
+    const py::tuple entry = py::reinterpret_borrow<py::tuple>(item);
+    if (py::isinstance(entry[1], property)) names.push_back(py::str(entry[0]));
+  }
+  return names;
+}
+
+// T() with the keyword arguments set as its fields, so that every field not given keeps its
+// C++ default; TypeError for a name that is not a field
+template <class T>
+T from_keywords(const py::kwargs& kwargs) {
+  T value;
+  const py::object self = py::cast(&value, py::return_value_policy::reference);
+  const std::vector<std::string> fields = field_names(py::type::of(self));
+  for (const auto& [key, field] : kwargs) {
+    const std::string name = py::str(key);
+    if (std::find(fields.begin(), fields.end(), name) == fields.end()) {
+      throw py::type_error(py::str(py::type::of(self).attr("__name__")).cast<std::string>() + " has no field '" + name + "'");
+    }
+    py::setattr(self, name.c_str(), field);
+  }
+  return value;
+}
+
+// Binds T's keyword constructor and a repr of its fields
+template <class T>
+void keyword_struct(py::class_<T>& cls) {
+  cls.def(py::init([](const py::kwargs& kwargs) { return from_keywords<T>(kwargs); }));
+  cls.def("__repr__", [](const py::object& self) {
+    std::string text = py::str(py::type::of(self).attr("__name__"));
+    const char* separator = "(";
+    for (const std::string& name : field_names(py::type::of(self))) {
+      text += separator + name + "=" + py::repr(self.attr(name.c_str())).cast<std::string>();
+      separator = ", ";
+    }
+    return text + ")";
+  });
+}
+
+// The description given, or one made from its fields (not both)
+template <class T>
+T given_or_from_keywords(const std::optional<T>& given, const py::kwargs& kwargs, const char* what) {
+  if (given && !kwargs.empty()) throw py::type_error(std::string("give ") + what + " or its fields, not both");
+  return given ? *given : from_keywords<T>(kwargs);
+}
+
 }  // namespace
 
-PYBIND11_MODULE(_core, m) {
-  m.doc() = "simbake C++ core: meshes, level sets, rigid-body world";
-  m.attr("__version__") = SIMBAKE_VERSION;
 
-  // geometry
+namespace {
+
+void bind_geometry(py::module_& m) {
   m.def("sphere_mesh", [](double r, int s) { return mesh_tuple(make_sphere_mesh(positive(r, "radius"), s)); },
         py::arg("radius"), py::arg("subdivisions"));
   m.def("box_mesh", [](const Vec3& size, int s) { return mesh_tuple(make_box_mesh(positive(size, "size"), s)); },
@@ -135,7 +216,9 @@ PYBIND11_MODULE(_core, m) {
   m.def("sphere_mass_properties", [](double r) { return mass_dict(sphere_mass_properties(positive(r, "radius"))); }, py::arg("radius"));
   m.def("box_mass_properties", [](const Vec3& s) { return mass_dict(box_mass_properties(positive(s, "size"))); }, py::arg("size"));
 
-  // level sets
+}
+
+void bind_level_sets(py::module_& m) {
   py::class_<LevelSet>(m, "LevelSet")
       .def_static("sphere", [](double r) { return LevelSet{std::make_shared<SphereDistance>(positive(r, "radius")), nullptr}; })
       .def_static("box", [](const Vec3& size) { return LevelSet{std::make_shared<BoxDistance>(positive(size, "size")), nullptr}; })
@@ -181,124 +264,196 @@ PYBIND11_MODULE(_core, m) {
       .def_property_readonly("voxel_size", [](const LevelSet& ls) { return ls.grid ? ls.grid->voxel_size() : 0.0; })
       .def_property_readonly("active_voxel_count", [](const LevelSet& ls) { return ls.grid ? ls.grid->active_voxel_count() : 0; })
       .def_property_readonly("memory_bytes", [](const LevelSet& ls) { return ls.grid ? ls.grid->memory_bytes() : 0; });
+}
 
-  // the world
-  py::class_<World>(m, "World")
-      .def(py::init([](const Vec3& gravity, int collision_sweeps, int contact_sweeps, double max_substep,
-                       double travel_fraction, int max_substeps, int threads, double cloth_max_substep,
-                       bool speculative_contacts, double contact_tolerance, bool box_contacts, int shock_sweeps,
-                       bool cloth_contacts_in_solve) {
-             WorldSettings s;
-             s.gravity = gravity;
-             s.collision_sweeps = collision_sweeps;
-             s.contact_sweeps = contact_sweeps;
-             s.max_substep = max_substep;
-             s.travel_fraction = travel_fraction;
-             s.max_substeps = max_substeps;
-             s.threads = threads;
-             s.cloth_max_substep = positive(cloth_max_substep, "cloth_max_substep");
-             s.speculative_contacts = speculative_contacts;
-             s.box_contacts = box_contacts;
-             if (shock_sweeps < 0) throw std::invalid_argument("shock_sweeps must be >= 0");
-             s.shock_sweeps = shock_sweeps;
-             s.cloth_contacts_in_solve = cloth_contacts_in_solve;
-             s.contact_tolerance = positive(contact_tolerance, "contact_tolerance");
-             positive(max_substep, "max_substep");
-             positive(travel_fraction, "travel_fraction");
-             return World(s);
+void bind_settings(py::module_& m) {
+  py::class_<WorldSettings> settings(m, "WorldSettings", "The world's settings (world/world_settings.h), by keyword");
+  settings.def_readwrite("gravity", &WorldSettings::gravity)
+      .def_readwrite("collision_sweeps", &WorldSettings::collision_sweeps)
+      .def_readwrite("contact_sweeps", &WorldSettings::contact_sweeps)
+      .def_readwrite("shock_sweeps", &WorldSettings::shock_sweeps)
+      .def_readwrite("sleep_speed", &WorldSettings::sleep_speed)
+      .def_readwrite("sleep_time", &WorldSettings::sleep_time)
+      .def_readwrite("penetration_slop", &WorldSettings::penetration_slop)
+      .def_readwrite("penetration_recovery", &WorldSettings::penetration_recovery)
+      .def_readwrite("max_recovery_speed", &WorldSettings::max_recovery_speed)
+      .def_readwrite("contact_tolerance", &WorldSettings::contact_tolerance)
+      .def_readwrite("speculative_contacts", &WorldSettings::speculative_contacts)
+      .def_readwrite("box_contacts", &WorldSettings::box_contacts)
+      .def_readwrite("max_substep", &WorldSettings::max_substep)
+      .def_readwrite("cloth_contact_substep", &WorldSettings::cloth_contact_substep)
+      .def_readwrite("bounce_substep", &WorldSettings::bounce_substep)
+      .def_readwrite("cloth_contacts_in_solve", &WorldSettings::cloth_contacts_in_solve)
+      .def_readwrite("cloth_max_substep", &WorldSettings::cloth_max_substep)
+      .def_readwrite("travel_fraction", &WorldSettings::travel_fraction)
+      .def_readwrite("max_substeps", &WorldSettings::max_substeps)
+      .def_readwrite("threads", &WorldSettings::threads);
+  keyword_struct(settings);
+  m.attr("MAX_THREADS") = kMaxThreads;
+
+  py::class_<GroundDef> ground(m, "GroundDef", "The ground plane y = height (rigid/rigid_model.h), by keyword");
+  ground.def_readwrite("height", &GroundDef::height)
+      .def_readwrite("friction", &GroundDef::friction)
+      .def_readwrite("restitution", &GroundDef::restitution);
+  keyword_struct(ground);
+}
+
+void bind_body_desc(py::module_& m) {
+  py::class_<BodyDesc> body(m, "BodyDesc", "A rigid body's description (rigid/rigid_model.h), by keyword");
+  body.def_property("shape",
+                    [](const BodyDesc& d) -> std::optional<LevelSet> {
+                      if (!d.shape) return std::nullopt;
+                      return LevelSet{d.shape, std::const_pointer_cast<VdbLevelSet>(std::dynamic_pointer_cast<const VdbLevelSet>(d.shape))};
+                    },
+                    [](BodyDesc& d, const LevelSet* shape) { d.shape = shape ? shape->distance : nullptr; },
+                    "level set in mesh coordinates, or None when nothing can touch the body")
+      .def_readwrite("samples", &BodyDesc::samples, "(s, 3) surface samples, mesh coordinates (m)")
+      .def_readwrite("mesh_vertices", &BodyDesc::mesh_vertices, "(n, 3) the closed mesh the level set was baked from")
+      .def_readwrite("mesh_triangles", &BodyDesc::mesh_triangles, "(m, 3) its triangles")
+      .def_property("mass_properties", [](const BodyDesc& d) { return mass_dict(d.unit_mass); },
+                    [](BodyDesc& d, const py::dict& props) { d.unit_mass = mass_from_dict(props); },
+                    "the shape's at density 1: {volume, center, inertia}")
+      .def_readwrite("mass", &BodyDesc::mass, "(kg); ignored for kinematic bodies")
+      .def_readwrite("origin", &BodyDesc::origin, "world position of the mesh origin (m)")
+      .def_property("orientation",
+                    [](const BodyDesc& d) {
+                      return Eigen::Vector4d(d.orientation.w(), d.orientation.x(), d.orientation.y(), d.orientation.z());
+                    },
+                    [](BodyDesc& d, const Eigen::Vector4d& q) { d.orientation = quat_wxyz(q); },
+                    "mesh orientation in world [w, x, y, z]")
+      .def_readwrite("linear_velocity", &BodyDesc::linear_velocity, "of the centre of mass (m/s)")
+      .def_readwrite("angular_velocity", &BodyDesc::angular_velocity, "world (rad/s)")
+      .def_readwrite("friction", &BodyDesc::friction)
+      .def_readwrite("restitution", &BodyDesc::restitution)
+      .def_readwrite("kinematic", &BodyDesc::kinematic);
+  keyword_struct(body);
+}
+
+void bind_cloth_desc(py::module_& m) {
+  py::class_<ClothDesc> cloth(m, "ClothDesc", "A cloth's description (cloth/cloth_model.h), by keyword");
+  const auto material = [](const char* name, double ClothMaterial::*field) {
+    return std::make_tuple(name, field);
+  };
+  cloth.def_readwrite("rest", &ClothDesc::rest, "(n, 3) rest positions = initial positions (m)")
+      .def_readwrite("triangles", &ClothDesc::triangles, "(m, 3)")
+      .def_readwrite("area_density", &ClothDesc::area_density, "(kg/m^2)");
+  enum_field(cloth, "model", [](ClothDesc& d) -> InPlaneModel& { return d.material.model; }, kModels);
+  for (const auto& [name, field] : {material("stretch_stiffness", &ClothMaterial::stretch_stiffness),
+                                    material("poisson_ratio", &ClothMaterial::poisson_ratio),
+                                    material("bend_stiffness", &ClothMaterial::bend_stiffness),
+                                    material("damping", &ClothMaterial::damping),
+                                    material("strain_limit", &ClothMaterial::strain_limit),
+                                    material("subgrid_scale", &ClothMaterial::subgrid_scale)}) {
+    cloth.def_property(name, [field = field](const ClothDesc& d) { return d.material.*field; },
+                       [field = field](ClothDesc& d, double value) { d.material.*field = value; });
+  }
+  enum_field(cloth, "compression", [](ClothDesc& d) -> CompressionMode& { return d.material.compression; }, kCompressions);
+  cloth.def_readwrite("pinned", &ClothDesc::pinned, "vertices held fixed");
+  enum_field(cloth, "integrator", [](ClothDesc& d) -> ClothIntegrator& { return d.integrator; }, kIntegrators);
+  cloth.def_readwrite("tolerance", &ClothDesc::tolerance, "implicit: the linear solve's relative residual");
+  enum_field(cloth, "preconditioner", [](ClothDesc& d) -> ClothPreconditioner& { return d.preconditioner; },
+             kPreconditioners);
+  cloth.def_readwrite("friction", &ClothDesc::friction, "Coulomb coefficient against bodies and the ground")
+      .def_readwrite("thickness", &ClothDesc::thickness, "(m) kept from bodies, the ground and itself")
+      .def_readwrite("self_collision", &ClothDesc::self_collision);
+  keyword_struct(cloth);
+}
+
+// Every body's state now, one array per quantity (n = body count)
+py::dict body_states(const World& w) {
+  const RigidData& data = w.rigid_data();
+  const int n = w.body_count();
+  Points x(n, 3), v(n, 3), l(n, 3), omega(n, 3);
+  Quats q(n, 4);
+  Eigen::Array<bool, Eigen::Dynamic, 1> asleep(n);
+  for (int i = 0; i < n; ++i) {
+    x.row(i) = data.x[i].transpose();
+    v.row(i) = data.v[i].transpose();
+    l.row(i) = data.l[i].transpose();
+    q.row(i) << data.q[i].w(), data.q[i].x(), data.q[i].y(), data.q[i].z();
+    omega.row(i) = angular_velocity(w.body_def(i), data.q[i], data.l[i]).transpose();
+    asleep[i] = data.asleep[i] != 0;
+  }
+  py::dict d;
+  d["center_of_mass"] = x;
+  d["orientation"] = q;
+  d["linear_velocity"] = v;
+  d["angular_momentum"] = l;
+  d["angular_velocity"] = omega;
+  d["asleep"] = asleep;
+  return d;
+}
+
+py::dict statistics_dict(const StepStatistics& s) {
+  py::dict d;
+  d["substeps"] = s.substeps;
+  d["cloth_steps"] = s.cloth_steps;
+  d["max_penetration"] = s.max_penetration;
+  d["kinetic_energy"] = s.kinetic_energy;
+  d["potential_energy"] = s.potential_energy;
+  d["impulses"] = s.impulses;
+  d["finite"] = s.finite;
+  d["elastic_energy"] = s.elastic_energy;
+  d["cloth_penetration"] = s.cloth_penetration;
+  d["max_cloth_strain"] = s.max_cloth_strain;
+  d["cloth_solver_iterations"] = s.cloth_solver_iterations;
+  d["cloth_solver_seconds"] = s.cloth_solver_seconds;
+  d["self_repulsions"] = s.self_collision.repulsions;
+  d["self_collision_impulses"] = s.self_collision.collisions;
+  d["impact_zone_rounds"] = s.self_collision.zone_rounds;
+  d["impact_zone_vertices"] = s.self_collision.zone_vertices;
+  d["cloth_held_still"] = s.self_collision.stills;
+  d["self_collision_searches"] = s.self_collision.searches;
+  d["self_collision_candidates"] = s.self_collision.candidates;
+  d["self_collision_updates"] = s.self_collision.updates;
+  d["self_collision_tests"] = s.self_collision.tests;
+  d["self_collision_near_pairs"] = s.self_collision.near_pairs;
+  return d;
+}
+
+py::dict quality_dict(const FrameQuality& q) {
+  const auto figure = [](const PenetrationFigure& p) { return py::make_tuple(p.depth, p.a, p.b); };
+  py::dict d;
+  d["body_penetration"] = figure(q.body_penetration);
+  py::list cloths;
+  for (const ClothQuality& c : q.cloths) {
+    py::dict cd;
+    cd["max_strain"] = c.max_strain;
+    cd["self_intersections"] = c.self_intersections;
+    cd["vertex_penetration"] = figure(c.vertex_penetration);
+    cd["edge_penetration"] = figure(c.edge_penetration);
+    cloths.append(cd);
+  }
+  d["cloths"] = cloths;
+  return d;
+}
+
+// Building a world: its settings, ground, bodies (and their keys) and cloths
+void bind_world_building(py::class_<World>& world) {
+  world
+      .def(py::init([](const std::optional<WorldSettings>& settings, const py::kwargs& kwargs) {
+             return World(given_or_from_keywords(settings, kwargs, "settings"));
            }),
-           py::arg("gravity") = WorldSettings().gravity,
-           py::arg("collision_sweeps") = WorldSettings().collision_sweeps,
-           py::arg("contact_sweeps") = WorldSettings().contact_sweeps,
-           py::arg("max_substep") = WorldSettings().max_substep,
-           py::arg("travel_fraction") = WorldSettings().travel_fraction,
-           py::arg("max_substeps") = WorldSettings().max_substeps,
-           py::arg("threads") = WorldSettings().threads,
-           py::arg("cloth_max_substep") = WorldSettings().cloth_max_substep,
-           py::arg("speculative_contacts") = WorldSettings().speculative_contacts,
-           py::arg("contact_tolerance") = WorldSettings().contact_tolerance,
-           py::arg("box_contacts") = WorldSettings().box_contacts,
-           py::arg("shock_sweeps") = WorldSettings().shock_sweeps,
-           py::arg("cloth_contacts_in_solve") = WorldSettings().cloth_contacts_in_solve)
-      .def("set_ground", [](World& w, double height, double friction, double restitution) {
-             w.set_ground(GroundDef{height, friction, restitution});
-           }, py::arg("height") = 0.0, py::arg("friction") = 0.5, py::arg("restitution") = 0.0)
-      .def("add_body", [](World& w, const LevelSet* shape, const Points& samples, const py::dict& mass_properties,
-                          double mass, const Vec3& origin, const Eigen::Vector4d& orientation,
-                          const Vec3& linear_velocity, const Vec3& angular_velocity, double friction,
-                          double restitution, bool kinematic, const std::optional<Points>& mesh_vertices,
-                          const std::optional<Triangles>& mesh_triangles) {
-             BodyDesc d;
-             if (shape) d.shape = shape->distance;
-             d.samples = samples;
-             if (mesh_vertices.has_value() != mesh_triangles.has_value()) {
+           py::arg("settings") = py::none(), "World(settings) or World(**WorldSettings fields)")
+      .def_property_readonly("settings", &World::settings)
+      .def("set_ground", [](World& w, const std::optional<GroundDef>& ground, const py::kwargs& kwargs) {
+             w.set_ground(given_or_from_keywords(ground, kwargs, "ground"));
+           }, py::arg("ground") = py::none(), "set_ground(GroundDef) or set_ground(**GroundDef fields)")
+      .def("add_body", [](World& w, const std::optional<BodyDesc>& given, const py::kwargs& kwargs) {
+             const BodyDesc desc = given_or_from_keywords(given, kwargs, "desc");
+             if ((desc.mesh_vertices.rows() > 0) != (desc.mesh_triangles.rows() > 0)) {
                throw std::invalid_argument("give both mesh_vertices and mesh_triangles, or neither");
              }
-             if (mesh_vertices) {
-               to_mesh(*mesh_vertices, *mesh_triangles);
-               d.mesh_vertices = *mesh_vertices;
-               d.mesh_triangles = *mesh_triangles;
-             }
-             d.unit_mass = mass_from_dict(mass_properties);
-             d.mass = mass;
-             d.origin = origin;
-             d.orientation = quat_wxyz(orientation);
-             d.linear_velocity = linear_velocity;
-             d.angular_velocity = angular_velocity;
-             d.friction = friction;
-             d.restitution = restitution;
-             d.kinematic = kinematic;
-             return w.add_body(d);
-           },
-           py::arg("shape"), py::arg("samples"), py::arg("mass_properties"), py::arg("mass"),
-           py::arg("origin"), py::arg("orientation"), py::arg("linear_velocity") = Vec3::Zero(),
-           py::arg("angular_velocity") = Vec3::Zero(), py::arg("friction") = 0.5,
-           py::arg("restitution") = 0.0, py::arg("kinematic") = false,
-           py::arg("mesh_vertices") = py::none(), py::arg("mesh_triangles") = py::none(),
-           "mesh_vertices (n, 3) and mesh_triangles (m, 3): the closed mesh a baked level-set shape was "
-           "made from, whose sharp edges and corners are then held out of cloth triangles")
-      .def("add_cloth", [](World& w, const Points& rest, const Triangles& triangles, double area_density,
-                           const std::string& model, double stretch_stiffness, double poisson_ratio,
-                           double bend_stiffness, double damping, double strain_limit, const std::string& compression,
-                           const std::vector<int>& pinned, const std::string& integrator, double friction,
-                           double thickness, double tolerance, bool self_collision, const std::string& preconditioner) {
-             ClothDesc d;
-             d.rest = rest;
-             d.triangles = triangles;
-             d.area_density = area_density;
-             d.material.model = choose<InPlaneModel>(model, {{"springs", InPlaneModel::kSprings}, {"membrane", InPlaneModel::kMembrane}});
-             d.material.stretch_stiffness = stretch_stiffness;
-             d.material.poisson_ratio = poisson_ratio;
-             d.material.bend_stiffness = bend_stiffness;
-             d.material.damping = damping;
-             d.material.strain_limit = strain_limit;
-             d.material.compression = choose<CompressionMode>(compression, {{"subgrid", CompressionMode::kSubgrid},
-                                                                            {"enforce", CompressionMode::kEnforce},
-                                                                            {"none", CompressionMode::kNone}});
-             d.pinned = pinned;
-             d.integrator = choose<ClothIntegrator>(integrator, {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}});
-             d.tolerance = tolerance;
-             d.preconditioner = choose<ClothPreconditioner>(preconditioner, {{"automatic", ClothPreconditioner::kAutomatic},
-                                                                             {"block_jacobi", ClothPreconditioner::kBlockJacobi},
-                                                                             {"multigrid", ClothPreconditioner::kMultigrid}});
-             return w.add_cloth(d, friction, thickness, self_collision);
-           },
-           py::arg("rest"), py::arg("triangles"), py::arg("area_density") = 0.1, py::arg("model") = "springs",
-           py::arg("stretch_stiffness") = 1000.0, py::arg("poisson_ratio") = 0.3, py::arg("bend_stiffness") = 1e-4,
-           py::arg("damping") = 0.01, py::arg("strain_limit") = 0.1, py::arg("compression") = "subgrid",
-           py::arg("pinned") = std::vector<int>(), py::arg("integrator") = "implicit", py::arg("friction") = 0.3,
-           py::arg("thickness") = 0.005, py::arg("tolerance") = ClothDesc().tolerance,
-           py::arg("self_collision") = true, py::arg("preconditioner") = "automatic")
-      .def_property_readonly("cloth_count", &World::cloth_count)
-      .def("cloth_state", [](const World& w, long long i) {
-             const Cloth& c = w.cloth(checked_index(i, w.cloth_count(), "cloth"));
-             return py::make_tuple(c.positions(), c.velocities(), c.vertex_normals());
-           }, py::arg("index"), "Positions (n, 3), velocities (n, 3) and vertex normals (n, 3) of cloth i")
-      .def("cloth_max_strain", [](const World& w, long long i) {
-             return w.cloth(checked_index(i, w.cloth_count(), "cloth")).max_strain();
-           }, py::arg("index"))
+             return w.add_body(desc);
+           }, py::arg("desc") = py::none(),
+           "add_body(BodyDesc) or add_body(**BodyDesc fields): the body's index. mesh_vertices and "
+           "mesh_triangles: the closed mesh a baked level-set shape was made from, whose sharp edges and "
+           "corners are then held out of cloth triangles")
+      .def("add_cloth", [](World& w, const std::optional<ClothDesc>& given, const py::kwargs& kwargs) {
+             return w.add_cloth(given_or_from_keywords(given, kwargs, "desc"));
+           }, py::arg("desc") = py::none(), "add_cloth(ClothDesc) or add_cloth(**ClothDesc fields): the cloth's index")
       .def("set_kinematic_track", [](World& w, long long index, const std::vector<double>& times, const Points& origins,
-                                      const Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>& orientations) {
+                                      const Quats& orientations) {
              if (origins.rows() != static_cast<Eigen::Index>(times.size()) || orientations.rows() != origins.rows()) {
                throw std::invalid_argument("keys need one position and one orientation per time");
              }
@@ -311,7 +466,12 @@ PYBIND11_MODULE(_core, m) {
              }
              w.set_kinematic_track(i, KinematicTrack(times, o, q));
            }, py::arg("index"), py::arg("times"), py::arg("positions"), py::arg("orientations"),
-           "Keyed kinematic body: mesh-origin positions (n, 3) and orientations (n, 4) [w, x, y, z] at times (s)")
+           "Keyed kinematic body: mesh-origin positions (n, 3) and orientations (n, 4) [w, x, y, z] at times (s)");
+}
+
+// Stepping a world
+void bind_world_stepping(py::class_<World>& world) {
+  world
       .def("step_frame", [](World& w, double frame_dt, int substeps) {
              positive(frame_dt, "frame_dt");
              if (substeps < 0) throw std::invalid_argument("substeps must be >= 0 (0 = automatic), got " + std::to_string(substeps));
@@ -328,8 +488,19 @@ PYBIND11_MODULE(_core, m) {
            }, py::arg("frame_dt"))
       .def("automatic_cloth_steps", [](const World& w, double frame_dt) {
              return w.automatic_cloth_steps(positive(frame_dt, "frame_dt"));
-           }, py::arg("frame_dt"))
-      .def_property_readonly("body_count", &World::body_count)
+           }, py::arg("frame_dt"));
+}
+
+// Reading a world's state and figures
+void bind_world_reading(py::class_<World>& world) {
+  world.def_property_readonly("body_count", &World::body_count)
+      .def_property_readonly("cloth_count", &World::cloth_count)
+      .def_property_readonly("sleeping_count", &World::sleeping_count)
+      .def_property_readonly("time", &World::time)
+      .def("body_states", &body_states,
+           "Every body's state now, one array each: center_of_mass (n, 3), orientation (n, 4) [w, x, y, z] "
+           "of the principal frame, linear_velocity (n, 3), angular_momentum (n, 3), angular_velocity (n, 3), "
+           "asleep (n,)")
       .def("mesh_poses", [](const World& w) {
              Points translations(w.body_count(), 3);
              Quats orientations(w.body_count(), 4);
@@ -341,88 +512,44 @@ PYBIND11_MODULE(_core, m) {
              }
              return py::make_tuple(translations, orientations);
            }, "World pose of each body's mesh origin: translations (n, 3), orientations (n, 4) [w, x, y, z]")
-      .def("body_state", [](const World& w, long long index) {
-             const int i = checked_index(index, w.body_count(), "body");
-             const RigidBodyState& s = w.body_state(i);
-             py::dict d;
-             d["center_of_mass"] = s.x;
-             d["orientation"] = Eigen::Vector4d(s.q.w(), s.q.x(), s.q.y(), s.q.z());
-             d["linear_velocity"] = s.v;
-             d["angular_momentum"] = s.l;
-             d["angular_velocity"] = angular_velocity(w.body_def(i), s);
-             return d;
-           }, py::arg("index"))
       .def("asleep", [](const World& w, long long i) { return w.asleep(checked_index(i, w.body_count(), "body")); },
            py::arg("index"))
-      .def_property_readonly("sleeping_count", &World::sleeping_count)
-      .def_property_readonly("time", &World::time)
-      .def("statistics", [](const World& w) {
-             const StepStatistics& s = w.statistics();
-             py::dict d;
-             d["substeps"] = s.substeps;
-             d["cloth_steps"] = s.cloth_steps;
-             d["max_penetration"] = s.max_penetration;
-             d["kinetic_energy"] = s.kinetic_energy;
-             d["potential_energy"] = s.potential_energy;
-             d["impulses"] = s.impulses;
-             d["finite"] = s.finite;
-             d["elastic_energy"] = s.elastic_energy;
-             d["cloth_penetration"] = s.cloth_penetration;
-             d["max_cloth_strain"] = s.max_cloth_strain;
-             d["cloth_solver_iterations"] = s.cloth_solver_iterations;
-             d["cloth_solver_seconds"] = s.cloth_solver_seconds;
-             d["self_repulsions"] = s.self_collision.repulsions;
-             d["self_collision_impulses"] = s.self_collision.collisions;
-             d["impact_zone_rounds"] = s.self_collision.zone_rounds;
-             d["impact_zone_vertices"] = s.self_collision.zone_vertices;
-             d["cloth_held_still"] = s.self_collision.stills;
-             d["self_collision_searches"] = s.self_collision.searches;
-             d["self_collision_candidates"] = s.self_collision.candidates;
-             d["self_collision_updates"] = s.self_collision.updates;
-             d["self_collision_tests"] = s.self_collision.tests;
-             d["self_collision_near_pairs"] = s.self_collision.near_pairs;
-             return d;
-           })
+      .def("cloth_state", [](const World& w, long long i) {
+             const Cloth& c = w.cloth(checked_index(i, w.cloth_count(), "cloth"));
+             return py::make_tuple(c.positions(), c.velocities(), c.vertex_normals());
+           }, py::arg("index"), "Positions (n, 3), velocities (n, 3) and vertex normals (n, 3) of cloth i")
+      .def("cloth_max_strain", [](const World& w, long long i) {
+             return w.cloth(checked_index(i, w.cloth_count(), "cloth")).max_strain();
+           }, py::arg("index"))
+      .def("statistics", [](const World& w) { return statistics_dict(w.statistics()); })
       .def("quality", [](const World& w) {
              FrameQuality q;
              {
                py::gil_scoped_release release;
                q = measure_quality(w);
              }
-             const auto figure = [](const PenetrationFigure& p) {
-               return py::make_tuple(p.depth, p.a, p.b);
-             };
-             py::dict d;
-             d["body_penetration"] = figure(q.body_penetration);
-             py::list cloths;
-             for (const ClothQuality& c : q.cloths) {
-               py::dict cd;
-               cd["max_strain"] = c.max_strain;
-               cd["self_intersections"] = c.self_intersections;
-               cd["vertex_penetration"] = figure(c.vertex_penetration);
-               cd["edge_penetration"] = figure(c.edge_penetration);
-               cloths.append(cd);
-             }
-             d["cloths"] = cloths;
-             return d;
+             return quality_dict(q);
            }, "Quality figures of the current state (world/quality.h): penetrations as (depth m, inside, "
               "into; -1 = none or the ground), per cloth its largest strain and self-intersections")
       .def("profile", [](const World& w) {
-             const StageProfile& p = w.profile();
              py::dict d;
-             d["broad_phase"] = p.broad_phase;
-             d["collisions"] = p.collisions;
-             d["velocities"] = p.velocities;
-             d["contacts"] = p.contacts;
-             d["shock_propagation"] = p.shock_propagation;
-             d["positions"] = p.positions;
-             d["sleeping"] = p.sleeping;
-             d["cloths"] = p.cloths;
-             d["cloth_forces"] = p.cloth_forces;
-             d["cloth_contacts"] = p.cloth_contacts;
-             d["cloth_strain"] = p.cloth_strain;
-             d["cloth_self_collision"] = p.cloth_self_collision;
-             d["statistics"] = p.statistics;
+             for (int k = 0; k < kStageCount; ++k) d[kStageNames[k]] = w.profile().seconds[k];
              return d;
-           });
+           }, "Wall seconds spent in each stage since the world was built (world/stages.h)");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "simbake C++ core: meshes, level sets, rigid bodies and cloths in a world";
+  m.attr("__version__") = SIMBAKE_VERSION;
+  bind_geometry(m);
+  bind_level_sets(m);
+  bind_settings(m);
+  bind_body_desc(m);
+  bind_cloth_desc(m);
+  py::class_<World> world(m, "World");
+  bind_world_building(world);
+  bind_world_stepping(world);
+  bind_world_reading(world);
 }

@@ -40,13 +40,15 @@ def build(n: int, cloth_step: float, tolerance: float, integrator: str, model: s
           strain_limit: float = 0.1) -> "_core.World":
     world = _core.World(gravity=np.array([0.0, -spec.GRAVITY, 0.0]), threads=1, cloth_max_substep=cloth_step,
                         cloth_contacts_in_solve=contacts_in_solve)
-    world.set_ground(spec.GROUND, 0.5, 0.0)
+    world.set_ground(height=spec.GROUND, friction=0.5, restitution=0.0)
     radius = spec.SPHERE_RADIUS
     samples = _core.sphere_mesh(radius, 4)[0]
-    world.add_body(_core.LevelSet.sphere(radius), samples, _core.sphere_mass_properties(radius), 1.0,
-                   np.array(spec.SPHERE_CENTER), np.array([1.0, 0.0, 0.0, 0.0]), friction=0.5, kinematic=True)
+    world.add_body(shape=_core.LevelSet.sphere(radius), samples=samples,
+                   mass_properties=_core.sphere_mass_properties(radius), mass=1.0,
+                   origin=np.array(spec.SPHERE_CENTER), orientation=np.array([1.0, 0.0, 0.0, 0.0]),
+                   friction=0.5, kinematic=True)
     vertices, triangles = spec.grid(n)
-    world.add_cloth(vertices, triangles, area_density=spec.AREA_DENSITY, model=model,
+    world.add_cloth(rest=vertices, triangles=triangles, area_density=spec.AREA_DENSITY, model=model,
                     stretch_stiffness=stretch, bend_stiffness=spec.BEND, damping=0.01,
                     strain_limit=strain_limit, integrator=integrator, friction=spec.FRICTION,
                     thickness=spec.THICKNESS, tolerance=tolerance, preconditioner=preconditioner,

@@ -42,7 +42,8 @@ SPHERE_SUBDIVISIONS = 8
 def build_world(scene: scenes.Scene, **settings) -> "_core.World":
     """The scene's world, with World settings (e.g. threads) on top of the defaults."""
     world = _core.World(gravity=np.array(scene.gravity, dtype=float), **settings)
-    world.set_ground(scene.ground_height, scenes.per_object(scene.mu, "geometric"), 0.0)
+    world.set_ground(height=scene.ground_height, friction=scenes.per_object(scene.mu, "geometric"),
+                     restitution=0.0)
     shapes = {}   # one level set and sample set per distinct shape (the pile shares one)
     for b in scene.bodies:
         key = (b.shape, b.size)
@@ -55,9 +56,11 @@ def build_world(scene: scenes.Scene, **settings) -> "_core.World":
                 shapes[key] = (_core.LevelSet.sphere(b.radius), _core.sphere_mesh(b.radius, SPHERE_SUBDIVISIONS)[0],
                                _core.sphere_mass_properties(b.radius))
         level_set, samples, mass_properties = shapes[key]
-        world.add_body(level_set, samples, mass_properties, b.mass, np.array(b.position, dtype=float),
-                       np.array(b.orientation, dtype=float), np.zeros(3), np.zeros(3),
-                       scenes.per_object(scene.mu, "geometric"), scene.e, False)
+        world.add_body(shape=level_set, samples=samples, mass_properties=mass_properties, mass=b.mass,
+                       origin=np.array(b.position, dtype=float),
+                       orientation=np.array(b.orientation, dtype=float), linear_velocity=np.zeros(3),
+                       angular_velocity=np.zeros(3), friction=scenes.per_object(scene.mu, "geometric"),
+                       restitution=scene.e, kinematic=False)
     return world
 
 

@@ -59,7 +59,7 @@ SPHERE_SECONDS, SPHERE_TIMED_SECONDS = 0.5, 1.0
 
 def slab_world(mu: float, start_x: float = BOX_START_X) -> "_core.World":
     world = _core.World(gravity=common.vec(G * math.sin(ANGLE), -G * math.cos(ANGLE), 0.0), threads=cr.THREADS)
-    world.set_ground(0.0, GROUND_FRICTION, 0.0)
+    world.set_ground(height=0.0, friction=GROUND_FRICTION, restitution=0.0)
     common.add_box(world, SLAB_SIZE, SLAB_MASS, (0.0, 0.5 * SLAB_SIZE[1], 0.0), friction=SLAB_FRICTION)
     common.add_box(world, BOX_SIZE, BOX_MASS, (start_x, SLAB_SIZE[1] + 0.5 * BOX_SIZE[1], 0.0),
                    friction=mu * mu / SLAB_FRICTION)
@@ -86,12 +86,12 @@ def slide_and_stick(substeps: int) -> dict:
                                        ("stick", MU_STICK, STICK_SECONDS, BOX_START_X)):
         frames = int(round(seconds * FPS))
         world = slab_world(mu, start_x)
-        x0 = [world.body_state(i)["center_of_mass"].copy() for i in range(2)]
+        x0 = [common.body_state(world, i)["center_of_mass"].copy() for i in range(2)]
         counts = step(world, frames - FPS if case == "stick" else frames, substeps)
-        mid = [world.body_state(i)["center_of_mass"].copy() for i in range(2)]   # stick: 1 s before the end
+        mid = [common.body_state(world, i)["center_of_mass"].copy() for i in range(2)]   # stick: 1 s before the end
         if case == "stick":
             counts += step(world, FPS, substeps)
-        slab, box = world.body_state(0), world.body_state(1)
+        slab, box = common.body_state(world, 0), common.body_state(world, 1)
         rel_v = float(box["linear_velocity"][0] - slab["linear_velocity"][0])
         rel_x = float((box["center_of_mass"][0] - slab["center_of_mass"][0]) - (x0[1][0] - x0[0][0]))
         rel_x_mid = float((mid[1][0] - mid[0][0]) - (x0[1][0] - x0[0][0]))
@@ -124,7 +124,7 @@ def spheres(substeps: int) -> dict:
     for e in (1.0, 0.0):
         world = sphere_world(e)
         counts = step(world, int(round(SPHERE_SECONDS * FPS)), substeps)
-        a, b = world.body_state(0), world.body_state(1)
+        a, b = common.body_state(world, 0), common.body_state(world, 1)
         va, vb = a["linear_velocity"], b["linear_velocity"]
         if e == 1.0:
             expected = (V_B, V_A)

@@ -62,15 +62,17 @@ def build(scene_name: str, **settings):
     peer = peer_scenes.build("pile")
     world = _core.World(gravity=np.array(peer.gravity, dtype=float), **settings)
     mu = peer_scenes.per_object(peer.mu, "geometric")
-    world.set_ground(peer.ground_height, mu, 0.0)
+    world.set_ground(height=peer.ground_height, friction=mu, restitution=0.0)
     size = np.array(peer.bodies[0].size, dtype=float)
     level_set = _core.LevelSet.box(size)
     samples = _core.box_mesh(size, run_simbake.BOX_SUBDIVISIONS)[0]
     mass_properties = _core.box_mass_properties(size)
     for b in peer.bodies:
         assert b.shape == "box" and tuple(b.size) == tuple(size)
-        world.add_body(level_set, samples, mass_properties, b.mass, np.array(b.position, dtype=float),
-                       np.array(b.orientation, dtype=float), np.zeros(3), np.zeros(3), mu, peer.e, False)
+        world.add_body(shape=level_set, samples=samples, mass_properties=mass_properties, mass=b.mass,
+                       origin=np.array(b.position, dtype=float),
+                       orientation=np.array(b.orientation, dtype=float), linear_velocity=np.zeros(3),
+                       angular_velocity=np.zeros(3), friction=mu, restitution=peer.e, kinematic=False)
     return world, peer.frames, 1.0 / peer_scenes.FPS, peer
 
 

@@ -73,9 +73,10 @@ def grid(n: int, size: float, y: float = 0.0):
 
 def add_sphere(world, radius, center, kinematic=True):
     from simbake import _core
-    return world.add_body(_core.LevelSet.sphere(radius), _core.sphere_mesh(radius, 4)[0],
-                          _core.sphere_mass_properties(radius), 1.0, np.array(center, float),
-                          np.array(IDENTITY), friction=0.5, kinematic=kinematic)
+    return world.add_body(shape=_core.LevelSet.sphere(radius), samples=_core.sphere_mesh(radius, 4)[0],
+                          mass_properties=_core.sphere_mass_properties(radius), mass=1.0,
+                          origin=np.array(center, float), orientation=np.array(IDENTITY), friction=0.5,
+                          kinematic=kinematic)
 
 
 def run_frames(world, frames: int, triangles, check=None, substeps: int = 0) -> dict:
@@ -108,7 +109,7 @@ def case_stiffness(stiffness: float, model: str) -> dict:
     w = _core.World()
     v, t = grid(33, 1.0, 1.0)
     pinned = list(range(33))  # the row j = 0 (the -z edge)
-    w.add_cloth(v, t, model=model, stretch_stiffness=stiffness, pinned=pinned)
+    w.add_cloth(rest=v, triangles=t, model=model, stretch_stiffness=stiffness, pinned=pinned)
     mass = 0.1 * 1.0
     worst_energy = [0.0]
 
@@ -137,10 +138,11 @@ def case_stiffness(stiffness: float, model: str) -> dict:
 def drape_world(n: int, **settings):
     from simbake import _core
     w = _core.World(**settings)
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     add_sphere(w, spec.SPHERE_RADIUS, spec.SPHERE_CENTER)
     v, t = spec.grid(n)
-    w.add_cloth(v, t, stretch_stiffness=spec.STRETCH, friction=spec.FRICTION, thickness=spec.THICKNESS)
+    w.add_cloth(rest=v, triangles=t, stretch_stiffness=spec.STRETCH, friction=spec.FRICTION,
+                thickness=spec.THICKNESS)
     return w, t
 
 
@@ -170,7 +172,7 @@ def case_curtain(speed: float) -> dict:
     v, t = grid(n, 1.0)
     v = np.stack([v[:, 0], 1.0 - v[:, 2], np.zeros(len(v))], -1)
     pinned = [k for k in range(len(v)) if v[k, 1] > 1.5 - 1e-9]
-    w.add_cloth(v, t, pinned=pinned)
+    w.add_cloth(rest=v, triangles=t, pinned=pinned)
     ball = add_sphere(w, 0.15, (0.0, 1.0, -1.0))
     travel = 2.0
     duration = travel / speed
@@ -183,16 +185,18 @@ def case_curtain(speed: float) -> dict:
 def case_spinner(spin: float) -> dict:
     from simbake import _core
     w = _core.World()
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     size = np.array([0.6, 0.6, 0.6])
-    box = w.add_body(_core.LevelSet.box(size), _core.box_mesh(size, 3)[0], _core.box_mass_properties(size), 1.0,
-                     np.array([0.0, 0.6, 0.0]), np.array(IDENTITY), friction=0.8, kinematic=True)
+    box = w.add_body(shape=_core.LevelSet.box(size), samples=_core.box_mesh(size, 3)[0],
+                     mass_properties=_core.box_mass_properties(size), mass=1.0,
+                     origin=np.array([0.0, 0.6, 0.0]), orientation=np.array(IDENTITY), friction=0.8,
+                     kinematic=True)
     times = np.linspace(0.0, 2.0, 65)
     angles = spin * times
     q = np.stack([np.cos(angles / 2), 0 * angles, np.sin(angles / 2), 0 * angles], -1)
     w.set_kinematic_track(box, list(times), np.tile([0.0, 0.6, 0.0], (len(times), 1)), q)
     v, t = grid(33, 1.4, 1.0)
-    w.add_cloth(v, t, friction=0.8)
+    w.add_cloth(rest=v, triangles=t, friction=0.8)
     return judge(run_frames(w, 48, t), strain=False)
 
 
@@ -217,15 +221,17 @@ def box_edges_through(world, box: int, size, points, triangles) -> int:
 def case_plow(speed: float) -> dict:
     from simbake import _core
     w = _core.World()
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     size = np.array([0.4, 0.4, 0.4])
     turn = [math.cos(math.pi / 8), 0.0, math.sin(math.pi / 8), 0.0]  # 45 degrees about y: an edge first
-    box = w.add_body(_core.LevelSet.box(size), _core.box_mesh(size, 3)[0], _core.box_mass_properties(size), 1.0,
-                     np.array([-0.9, 0.2, 0.0]), np.array(turn), friction=0.5, kinematic=True)
+    box = w.add_body(shape=_core.LevelSet.box(size), samples=_core.box_mesh(size, 3)[0],
+                     mass_properties=_core.box_mass_properties(size), mass=1.0,
+                     origin=np.array([-0.9, 0.2, 0.0]), orientation=np.array(turn), friction=0.5,
+                     kinematic=True)
     duration = 1.8 / speed
     w.set_kinematic_track(box, [0.0, duration], np.array([[-0.9, 0.2, 0.0], [0.9, 0.2, 0.0]]), np.array([turn, turn]))
     v, t = grid(21, 1.0, 0.02)
-    w.add_cloth(v, t, friction=0.5)
+    w.add_cloth(rest=v, triangles=t, friction=0.5)
     through = [0, None]
 
     def edges(world):
@@ -272,10 +278,10 @@ def case_triangles(kind: str, size: float) -> dict:
     elif kind == "zero":
         t = np.concatenate([t, np.array([[0, 1, 2]], dtype=np.int32)])  # collinear along the first row
     w = _core.World()
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     add_sphere(w, 0.3, (0.0, 0.3, 0.0))
     try:
-        w.add_cloth(v, t.astype(np.int32))
+        w.add_cloth(rest=v, triangles=t.astype(np.int32))
     except ValueError as error:
         message = str(error)
         one_line = "\n" not in message and "triangle" in message

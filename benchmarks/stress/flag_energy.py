@@ -35,8 +35,8 @@ def main() -> None:
     args = parser.parse_args()
     world = _core.World()
     rest, triangles = cloth_stress.grid(33, 1.0, 1.0)
-    world.add_cloth(rest, triangles, model=args.model, stretch_stiffness=args.stiffness, pinned=list(range(33)),
-                    preconditioner=args.preconditioner, tolerance=args.tolerance,
+    world.add_cloth(rest=rest, triangles=triangles, model=args.model, stretch_stiffness=args.stiffness,
+                    pinned=list(range(33)), preconditioner=args.preconditioner, tolerance=args.tolerance,
                     self_collision=args.self_collision == "on", friction=args.friction, damping=args.damping)
     for frame in range(1, 49):
         world.step_frame(1.0 / cloth_stress.FPS, 0)

@@ -127,16 +127,18 @@ def world(**settings):
 def add_box(w, size, mass, origin, orientation=IDENTITY, **kwargs) -> int:
     from simbake import _core
     size = np.asarray(size, dtype=float)
-    return w.add_body(_core.LevelSet.box(size), _core.box_mesh(size, BOX_SUBDIVISIONS)[0],
-                      _core.box_mass_properties(size), float(mass), np.asarray(origin, dtype=float),
-                      np.asarray(orientation, dtype=float), **kwargs)
+    return w.add_body(shape=_core.LevelSet.box(size), samples=_core.box_mesh(size, BOX_SUBDIVISIONS)[0],
+                      mass_properties=_core.box_mass_properties(size), mass=float(mass),
+                      origin=np.asarray(origin, dtype=float), orientation=np.asarray(orientation, dtype=float),
+                      **kwargs)
 
 
 def add_sphere(w, radius, mass, origin, **kwargs) -> int:
     from simbake import _core
-    return w.add_body(_core.LevelSet.sphere(radius), _core.sphere_mesh(radius, SPHERE_SUBDIVISIONS)[0],
-                      _core.sphere_mass_properties(radius), float(mass), np.asarray(origin, dtype=float),
-                      IDENTITY, **kwargs)
+    return w.add_body(shape=_core.LevelSet.sphere(radius),
+                      samples=_core.sphere_mesh(radius, SPHERE_SUBDIVISIONS)[0],
+                      mass_properties=_core.sphere_mass_properties(radius), mass=float(mass),
+                      origin=np.asarray(origin, dtype=float), orientation=IDENTITY, **kwargs)
 
 
 def positions(w) -> np.ndarray:
@@ -144,7 +146,7 @@ def positions(w) -> np.ndarray:
 
 
 def velocities(w, bodies) -> np.ndarray:
-    return np.array([w.body_state(i)["linear_velocity"] for i in bodies])
+    return w.body_states()["linear_velocity"][list(bodies)]
 
 
 def all_finite(w) -> bool:
@@ -267,7 +269,7 @@ def shoot(shape: str, speed: float, substeps: int, gap: float) -> dict:
     for _ in range(frames):
         if not s.frame():
             break
-    state = w.body_state(body)
+    state = common.body_state(w, body)
     v = np.asarray(state["linear_velocity"], dtype=float)
     omega = np.asarray(state["angular_velocity"], dtype=float)
     x = float(positions(w)[body][0])
@@ -331,7 +333,7 @@ def case_mass_ratio(heavy: float, layout: str) -> dict:
     0.2 m onto it), "alternating" (a column of six: 1 kg, heavy, 1 kg, ...). Drift is measured
     from the resting positions: over the whole run, and for "dropped" at the end."""
     w = world()
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     size = 0.5
     turn = quat_axis_angle([0.0, 1.0, 0.0], math.radians(15.0))
     if layout == "alternating":
@@ -382,7 +384,7 @@ def tower(boxes: int, seconds: float, substeps: int = 0, max_substep: float | No
     it: already in contact, within the engine's 0.2 mm penetration slop)."""
     settings = {} if max_substep is None else {"max_substep": max_substep}
     w = world(**settings)
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     for i in range(boxes):
         add_box(w, [1.0, 1.0, 1.0], 1.0, [0.0, 0.5 + i * (1.0 - preload) - preload, 0.0])
     start = positions(w)
@@ -436,7 +438,7 @@ def case_bounce(substeps: int, apexes_judged: int = 1) -> dict:
     """The ballistic apex (y + v^2 / 2g of the last rising state) after each bounce, stepping
     substep by substep with World.step (the same dt as step_frame(1/24, substeps))."""
     w = world()
-    w.set_ground(0.0, 0.0, 0.0)
+    w.set_ground(height=0.0, friction=0.0, restitution=0.0)
     body = add_sphere(w, BOUNCE_R, 1.0, [0.0, BOUNCE_R + BOUNCE_H0, 0.0], restitution=BOUNCE_E, friction=0.0)
     dt = FRAME_DT / substeps
     steps = int(round(1.25 / dt))  # past the third apex
@@ -445,7 +447,7 @@ def case_bounce(substeps: int, apexes_judged: int = 1) -> dict:
     start = time.perf_counter()
     for k in range(steps):
         w.step(dt)
-        st = w.body_state(body)
+        st = common.body_state(w, body)
         y = float(st["center_of_mass"][1]) - BOUNCE_R
         vy = float(st["linear_velocity"][1])
         if not (np.isfinite(y) and np.isfinite(vy)):
@@ -508,7 +510,7 @@ def case_body_count(count: int, threads: int = THREADS) -> dict:
     base_rss = maxrss_mb()
     progress(stage="start", maxrss_mb=base_rss)
     w = world(threads=threads)
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     origins, orientations, side = pile_layout(count)
     for o, q in zip(origins, orientations):
         add_box(w, [0.5] * 3, 125.0, o, q)
@@ -596,11 +598,12 @@ def case_thin(width: float, drop: str) -> dict:
     level_set = _core.LevelSet.bake(v, t, voxel)
     bake_s = time.perf_counter() - bake_start
     w = world()
-    w.set_ground(0.0, 0.5, 0.0)
+    w.set_ground(height=0.0, friction=0.5, restitution=0.0)
     add_box(w, [width, POST_HEIGHT, width], 1.0, [0.0, POST_HEIGHT / 2, 0.0], kinematic=True)
     origin, axis, degrees, vel = DROPS[drop]
     mass = 600.0 * props["volume"]
-    ring = w.add_body(level_set, samples, props, mass, np.array(origin), quat_axis_angle(axis, math.radians(degrees)),
+    ring = w.add_body(shape=level_set, samples=samples, mass_properties=props, mass=mass,
+                      origin=np.array(origin), orientation=quat_axis_angle(axis, math.radians(degrees)),
                       linear_velocity=np.array(vel, dtype=float), friction=0.4)
     post_pts = post_surface_points(width)
     post_shape = _core.LevelSet.box(np.array([width, POST_HEIGHT, width]))
@@ -650,7 +653,7 @@ def case_overlap(layout: str, fraction: float) -> dict:
         a, b = [-(size - depth) / 2, 1.0, 0.0], [(size - depth) / 2, 1.0, 0.0]
     else:
         w = world()
-        w.set_ground(0.0, 0.5, 0.0)
+        w.set_ground(height=0.0, friction=0.5, restitution=0.0)
         if layout == "side":
             a, b = [-(size - depth) / 2, size / 2, 0.0], [(size - depth) / 2, size / 2, 0.0]
         else:  # "stacked": the upper box sunk into the lower one
@@ -665,7 +668,7 @@ def case_overlap(layout: str, fraction: float) -> dict:
         if not s.frame():
             break
         speed = float(np.linalg.norm(velocities(w, [0, 1]), axis=1).max())
-        spin = max(float(np.linalg.norm(w.body_state(i)["angular_velocity"])) for i in (0, 1))
+        spin = max(float(np.linalg.norm(common.body_state(w, i)["angular_velocity"])) for i in (0, 1))
         if s.frames * FRAME_DT <= 1.0 + 1e-9:
             peak_first = max(peak_first, speed)
         else:

@@ -1,5 +1,75 @@
 // Per-element energies, gradients and Hessians of the cloth (springs, StVK membrane,
-// dihedral-angle bending) and their assembly. The models and papers: top of cloth.cpp.
+// dihedral-angle bending) and their assembly.
+//
+// In-plane elasticity, two models behind one interface (material.model):
+//  * springs (the notes, "Curve / Springs"): every mesh edge is a spring, so a grid's
+//    sides resist stretch and its triangle diagonals resist shear. Per edge of rest length
+//    L, A = (x_j - x_i) / L is the deformation gradient of the segment and
+//        W = 1/2 E (|A| - 1)^2 L,     f_j = -E (|x_j - x_i| / L - 1) d = -f_i,
+//    d the unit edge direction: a spring of constant k = E / L. E (N, force per unit
+//    strain) is not the user's number: stretch_stiffness is the sheet's stiffness Y (N/m,
+//    as for the membrane) and each edge gets E = 12/5 Y a / L, a its share of the rest area
+//    (a third of each of its triangles), i.e. the width of sheet it stands for. A refined
+//    mesh is then the same sheet, and a regular right-triangle grid pulled along an axis
+//    resists with exactly Y (its sides give 1/3 and its diagonals 1/12 of Y a / L's
+//    stiffness: 5/12); an equilateral mesh gives 0.8 Y in every direction.
+//  * membrane (the notes, "Elastic Surfaces" to "Surface elasticity"): each triangle is a
+//    linear element; its rest shape is laid out in its own 2D frame (Dm, 2x2) so that the
+//    deformation gradient F = Ds Dm^-1 is 3x2 (Ds = [x1 - x0, x2 - x0]), the Green strain
+//    G = 1/2 (F^T F - I) is 2x2, and St. Venant-Kirchhoff gives
+//        W = A0 (mu G:G + lambda/2 tr(G)^2),   S = 2 mu G + lambda tr(G) I,   P = F S,
+//        forces on (x1, x2) = -A0 P Dm^-T (columns), on x0 minus their sum,
+//    with plane-stress Lame parameters from Y = stretch_stiffness (Young's modulus x
+//    thickness, N/m) and nu = poisson_ratio: mu = Y / (2 (1 + nu)), lambda = Y nu / (1 - nu^2),
+//    so that a sheet pulled one way with free sides carries S11 = Y G11 and narrows by
+//    G22 = -nu G11.
+// Compression (notes, "Compression and buckling", Choi and Ko 2002's subgrid idea): real cloth
+// buckles instead of compressing, which a coarse mesh cannot resolve. With kSubgrid (and
+// kEnforce) a spring under compression (|A| < 1) has stiffness E x subgrid_scale; the
+// membrane does the same per principal Green strain (W = mu sum s(g_i) g_i^2 + lambda/2
+// s(tr G) tr(G)^2, s = subgrid_scale for a negative argument, else 1), so a sheet compressed
+// one way and stretched the other only resists the stretch. kNone is symmetric.
+// kEnforce adds an impulse pass (below) that keeps edges from shortening at all.
+//
+// Bending (notes, "Bending energy"; Grinspun, Hirani, Desbrun and Schroeder 2003, "Discrete
+// shells"): for each interior edge (hinge) e with current dihedral angle theta, rest angle
+// theta0 (of the rest mesh, so a curved rest mesh keeps its shape), rest length |e| and the
+// rest areas A1, A2 of its two triangles,
+//        W_e = c B (theta - theta0)^2 |e|^2 / (A1 + A2),     c = 1/2 (not the 3/2 of the paper).
+// The constant is set so that the energy of a cylinder matches the continuum 1/2 B (1/R1 +
+// 1/R2)^2 = B / (2 R^2) per unit area (cloth bends isometrically, so this is the case that
+// matters). Derivation: for a regular mesh bent onto a cylinder of radius R, the hinges
+// along the axis between strips of width h turn by theta = h / R and the others stay flat
+// (exactly so on a grid with the axis along a grid direction; on an equilateral mesh the
+// sum over the three edge directions gives the same, for any axis direction). Per unit
+// area there is one axial hinge per h x a, with |e|^2 / (A1 + A2) = a^2 / (a h), so the
+// energy per area is c B (h/R)^2 (a / h) / (h a) = c B / R^2: c = 1/2. More generally, on
+// an equilateral mesh the edge sum has the density c (H2 - 8/3 K), H2 = (1/R1 + 1/R2)^2
+// and K the Gaussian curvature, whatever the orientation; the paper's 3/2 makes the H2 term
+// 3x too stiff (it is calibrated on a sphere, where the K term takes the excess back). With
+// 1/2 the H2 term is exact and the K term, whose integral is topological (Gauss-Bonnet),
+// exerts no force inside the sheet; cloth bends nearly isometrically (K ~ 0) anyway.
+// Checked by the test ClothBending.CylinderEnergyConvergesToContinuum (grid and
+// equilateral meshes; the error is the boundary's, ~1/n). Note: on a grid whose diagonals
+// all run one way the energy of a cylinder depends on its direction (an anisotropy of the
+// mesh, not of the constant): exact when the curvature runs along a grid axis or across the
+// diagonals, 3x when it runs along them, 0.75x at the least (15 degrees off the axis).
+// The dihedral angle's gradient is the closed form of Bridson, Marino and Fedkiw 2003
+// ("Simulation of clothing with folds and wrinkles"): opposite vertex x2 gets -n_A / h_A,
+// x3 gets -n_B / h_B, the edge's vertices the rest weighted by where x2, x3 project onto the
+// edge. The force is -B (theta - theta0) |e|^2 / (A1 + A2) grad theta.
+//
+// Damping (notes, soft constraints with Rayleigh damping): f_d = -damping x H_m v, where
+// H_m is the elastic Hessian's material (Gauss-Newton) part: for springs E/L d d^T, so only
+// the relative velocity along the edge is damped; for the membrane (dG/dx)^T C (dG/dx) A0,
+// i.e. the strain rate; for bending grad theta grad theta^T. Each is zero for any rigid
+// motion (rigid velocities change no edge length, Green strain or dihedral angle at first
+// order), so a freely spinning and translating cloth keeps its momentum and energy. (The
+// full Hessian would not: its geometric part times a rotation is not zero under tension.)
+// H_m is evaluated at the midpoint x + dt/2 v of the step, where the velocity the step
+// uses is rigid to O(a^3) for a rotation by a per step (at x it would be O(a): enough,
+// times a large stiffness, to brake a spinning cloth visibly).
+//
 // GCC 12 reports false "may be used uninitialized" warnings inside Eigen's fixed-size
 // self-adjoint eigen solver (9x9, used by project_psd); they come from Eigen's headers,
 // which Eigen/Core already brought in, so the switch must precede every include.

@@ -1,6 +1,6 @@
 // The cloth's internal forces, element by element, and their assembly over a whole cloth.
 // Private to core/cloth (Cloth uses it; the tests check it against finite differences);
-// the formulas and the papers they come from are described at the top of cloth.cpp.
+// the formulas and the papers they come from are described at the top of cloth_forces.cpp.
 //
 // Conventions: every element function works on the energy W of one element. "gradient" is
 // dW/dx (the force is its negative); "hessian" is d2W/dx2 (the force Jacobian K = df/dx is

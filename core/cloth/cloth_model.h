@@ -1,8 +1,9 @@
-// The constant half of a cloth (DESIGN.md, "Where the core is heading": a model / data
-// split): what a cloth is made of (ClothDesc, ClothMaterial) and what is built from it once
-// (ClothModel: topology, rest state, masses, pins, material, the element forces, the implicit
-// system's pattern, the explicit stability limit). Copies of a Cloth share one model and
-// hold only their state (x, v) and the solver's scratch (cloth.h).
+// The constant half of a cloth (a model / data split, as MuJoCo's): what a cloth is made of
+// (ClothDesc, ClothMaterial: the only home of their defaults, which the Python bindings read)
+// and what is built from it once (ClothModel: topology, rest state, masses, pins, material,
+// the element forces, the implicit system's pattern, the explicit stability limit). Copies of
+// a Cloth share one model and hold only their state (cloth_data.h) and the solver's scratch
+// (integrators.h).
 #pragma once
 
 #include "math/types.h"
@@ -21,13 +22,13 @@ enum class InPlaneModel { kSprings, kMembrane };      // springs along edges | S
 enum class CompressionMode { kSubgrid, kEnforce, kNone };
 enum class ClothIntegrator { kExplicit, kImplicit };
 // the implicit solve's preconditioner: automatic = multigrid from 1,000 free vertices when none is
-// pinned, else block-Jacobi (cloth.cpp says why)
+// pinned, else block-Jacobi (integrators.cpp says why)
 enum class ClothPreconditioner { kAutomatic, kBlockJacobi, kMultigrid };
 
 struct ClothMaterial {
   InPlaneModel model = InPlaneModel::kSprings;
   double stretch_stiffness = 1000.0;  // the sheet's stiffness Y (N/m): the membrane's Young's modulus x
-                                      // thickness; springs get E = Y x (area share) / L each (cloth.cpp)
+                                      // thickness; springs get E = Y x (area share) / L each (cloth_forces.cpp)
   double poisson_ratio = 0.3;         // membrane only
   double bend_stiffness = 1e-4;       // B (N m): bending energy density 1/2 B (1/R1 + 1/R2)^2
   double damping = 0.01;              // Rayleigh stiffness-proportional damping coefficient (s)
@@ -45,15 +46,23 @@ struct ClothDesc {
   ClothIntegrator integrator = ClothIntegrator::kImplicit;
   double tolerance = 1e-3;            // implicit: the linear solve's relative residual (mass norm)
   ClothPreconditioner preconditioner = ClothPreconditioner::kAutomatic;  // implicit: of its conjugate gradients
+  double friction = 0.3;              // Coulomb coefficient against bodies and the ground
+  double thickness = 0.005;           // (m) kept from bodies, the ground and the cloth's own other layers
+  bool self_collision = true;         // kept from passing through itself (at `thickness`)
 };
 
-// Built once from a ClothDesc (cloth.cpp validates it and says how), never changed after
+// Built once from a ClothDesc (cloth_model.cpp validates it and says how), never changed after
 struct ClothModel {
   explicit ClothModel(const ClothDesc& desc);
 
+  // the description's, checked
   ClothMaterial material;
-  ClothIntegrator integrator = ClothIntegrator::kImplicit;
-  double tolerance = 1e-3;
+  ClothIntegrator integrator;
+  double tolerance;
+  double friction;
+  double thickness;              // (m)
+  bool self_collision;
+  // built from it
   Points rest;                   // (n x 3) rest positions (m)
   Triangles triangles;           // (m x 3)
   Eigen::VectorXd mass;          // (n) lumped masses (kg)

@@ -1,7 +1,7 @@
 // The arithmetic over the lower triangle of a symmetric 3x3-block matrix held in single
 // precision (multigrid.h's LowerBlocks): the product the conjugate gradients multiply by and
 // the two Gauss-Seidel sweeps of the multigrid V-cycle. These loops are where the implicit
-// cloth step spends most of its time (the drape at 33 x 33: 55% of its instructions).
+// cloth step spends most of its time.
 //
 // Each block A_ij (j < i) is read once and used twice, for its row (A_ij x_j) and,
 // transposed, for its column (A_ij^T x_i); its floats are converted to double and every sum is

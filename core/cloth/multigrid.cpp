@@ -3,20 +3,19 @@
 // Why. The implicit step solves A z = b with A = I + M^-1/2 (dt^2 H + c dt H_m) M^-1/2 (the
 // system scaled by the lumped masses). Its spectrum runs from ~1 (motions the mass
 // dominates: rigid ones, bending, in-plane waves longer than the distance sound travels in a
-// step, sqrt(Y / rho) dt, 1.2 m on the drape) up to 1 + dt^2 omega_max^2 with omega_max^2 ~
+// step, sqrt(Y / rho) dt) up to 1 + dt^2 omega_max^2 with omega_max^2 ~
 // 4 k / m ~ Y / (rho h^2): the condition number grows as 1/h^2, and block-Jacobi CG's
 // iterations as 1/h, so that each doubling of the resolution costs 4 x 2 = 8x. A multigrid
 // V-cycle removes the smooth, stiff in-plane error on coarse levels, where it is not smooth,
 // so that the count of iterations stays nearly flat and each costs O(n).
 //
-// Which. Measured on the drape's first 0.5 s (benchmarks/cloth/scaling.py, one thread):
-// block-Jacobi takes 24, 40, 62, 110, 224 iterations per step at 17, 33, 65, 129, 257
-// vertices a side; this preconditioner 6.8, 8.2, 8.2, 9.5, 11.1, each ~4x dearer, so the
-// solve is 7.4x faster at 257 (and no slower at 17). It is algebraic so that it works for
-// any triangle mesh (mesh cloths, pins, holes): the levels are built from the mesh's edge
-// graph, never from a grid. (A geometric multigrid would only serve grids; an incomplete or
-// lagged Cholesky factorization still needs O(1/h) iterations, or a fill that grows with n;
-// a direct factorization each step was 10x slower than block-Jacobi CG at 65 x 65.)
+// Which. Block-Jacobi's iterations per step double with each doubling of the resolution;
+// this preconditioner's stay nearly flat, each a few times dearer, so it wins from about a
+// thousand vertices on. It is algebraic so that it works for any triangle mesh (mesh cloths,
+// pins, holes): the levels are built from the mesh's edge graph, never from a grid. (A
+// geometric multigrid would only serve grids; an incomplete or lagged Cholesky factorization
+// still needs O(1/h) iterations, or a fill that grows with n; a direct factorization each
+// step costs many times block-Jacobi CG.)
 //
 // Method (Vanek, Mandel and Brezina 1996, "Algebraic multigrid by smoothed aggregation for
 // second and fourth order elliptic problems"; Trottenberg, Oosterlee and Schuller 2001,
@@ -30,10 +29,10 @@
 //    and z, so that it reproduces the rigid translations (the stiffness's null space).
 //    On the finest level the unknown is M^1/2 dv, where a translation is sqrt(m_i) x a
 //    constant: P's rows there are scaled by sqrt(m_i) (at a grid's edges and corners the
-//    masses are a half and a quarter; unscaled, the free fall's uniform dv took 10-17
-//    iterations at 129-257 instead of 6-8). Rotations are not in the coarse space (it
-//    would need 6 unknowns per aggregate); smooth hats approximate them, and the iteration
-//    count grows by ~1.6x from 17 to 257 vertices a side.
+//    masses are a half and a quarter; unscaled, a free fall's uniform dv is no longer a
+//    coarse translation and takes about twice the iterations). Rotations are not in the
+//    coarse space (it would need 6 unknowns per aggregate); smooth hats approximate them,
+//    and the iteration count grows slowly with the resolution.
 //  * Smoothed prolongation: P = (I - w D^-1 L) T, w = 2/3, with L = D - W the graph
 //    Laplacian of the level's edge graph (D the degrees). Its rows still sum to 1 (L 1 = 0),
 //    so translations pass exactly; each coarse basis function is a smooth hat over its
@@ -62,13 +61,12 @@
 //    into the residual of the rows j (the residual of a forward sweep from zero is the
 //    upper triangle's product alone), and the backward sweep gathers the old x_j (j < i)
 //    and scatters the new x_i to the rows it precedes. Against full storage, with the
-//    sweeps and the residual each walking their rows, this reads 2 x 6 instead of 30 of the
-//    drape's 13 blocks a row per cycle at the finest level (2 x 3 with the smoother below).
+//    sweeps and the residual each walking their rows, this reads 2 x 6 instead of 30 of a
+//    grid's 13 blocks a row per cycle at the finest level (2 x 3 with the smoother below).
 //  * The smoother. On the finest level the sweeps read the blocks between mesh-edge
 //    neighbours, 3 of the 6 below the diagonal in a grid's row, and drop the other 3 where
-//    they are small. Those couple the two vertices across a hinge, through bending alone: on
-//    the drape at rest 0.01 against 6-290 for a spring's block and 1,260 for the diagonal
-//    at 33 x 33, 2.6 against 100-4,000 and 20,100 at 129 x 129. Each dropped block's norm
+//    they are small. Those couple the two vertices across a hinge, through bending alone,
+//    orders of magnitude below a spring's block and the diagonal. Each dropped block's norm
 //    is added to the diagonals of its row and its column (diagonal compensation), so that
 //    the smoother's matrix S satisfies u . S u >= u . A u (each dropped pair's part of
 //    S - A is [|E| I, -E; -E^T, |E| I], positive semi-definite): its Gauss-Seidel
@@ -76,17 +74,13 @@
 //    residual, the coarse levels are Galerkin's of A). The conjugate gradients multiply by
 //    A itself, so the solve still meets its tolerance on the true system. The compensation
 //    makes S stiffer than A, most where bending is a large part of a diagonal's smallest
-//    eigenvalue (the out-of-plane one): its share there, (sum |E|) |D^-1|, averages 0.01 at
-//    33 x 33, 0.09 at 65, 0.3 at 129 and 0.65 at 257 on the resting drape (a scratch
-//    build's print, not kept). A row whose
-//    share would pass 0.5 keeps its blocks (every update decides, from the values):
-//    dropped everywhere, the drape took 21.6 iterations a step at 257 x 257 instead of
-//    18.05 and cost 2% more; kept where needed, 18.4. Dropped without any compensation, the
-//    resting system took 36 iterations instead of 20 at 129 x 129 (a scratch NumPy prototype
-//    of this cycle on systems dumped from the bake, not kept). Reading half the blocks, the drape's whole step
-//    costs 0.86x at 33 x 33, 0.90x at 65 and 0.83x at 129 (benchmarks/cloth/run_simbake.py N
-//    in turn with a checkout of 9dc27ec, the build before: medians of 6 and 3 pairs, one at
-//    129; the solve 0.80x, 0.85x and 0.77x), the iterations a step 18-20 as before.
+//    eigenvalue (the out-of-plane one): its share there, (sum |E|) |D^-1|, grows as the mesh
+//    is refined (the bending blocks grow as 1/h^2 against the diagonal). A row whose share
+//    would pass 0.5 keeps its blocks (every update decides, from the values): dropped
+//    everywhere, the stiffer smoother costs more iterations than the blocks it saves;
+//    dropped without any compensation, the cycle is no longer a convergent smoother and the
+//    iterations nearly double. Reading half the blocks makes the cycle, the bulk of the
+//    solve, correspondingly cheaper at the same iteration count.
 //    Everything runs in a fixed order on one thread, so the result has the same bits at any
 //    thread count.
 #include "cloth/multigrid.h"
@@ -312,6 +306,65 @@ void BlockJacobi::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
   for (size_t k = 0; k < inverse_.size(); ++k) at(z, static_cast<int>(k)) = inverse_[k] * at(r, static_cast<int>(k));
 }
 
+// B = A P: its pattern (fine rows, coarse columns) and the recipe of its blocks from A's
+void Multigrid::right_product(const BlockMatrix& a, const Prolongation& p, BlockMatrix& b, Recipe& right) {
+  std::vector<std::vector<int>> b_rows(a.size);
+  for (int i = 0; i < a.size; ++i) {
+    for (int k = a.start[i]; k < a.start[i + 1]; ++k) {
+      const int j = a.column[k];
+      for (int e = p.start[j]; e < p.start[j + 1]; ++e) b_rows[i].push_back(p.coarse[e]);
+    }
+    std::sort(b_rows[i].begin(), b_rows[i].end());
+    b_rows[i].erase(std::unique(b_rows[i].begin(), b_rows[i].end()), b_rows[i].end());
+  }
+  b.size = a.size;
+  b.start.assign(1, 0);
+  for (const std::vector<int>& row : b_rows) {
+    b.column.insert(b.column.end(), row.begin(), row.end());
+    b.start.push_back(static_cast<int>(b.column.size()));
+  }
+  b.block.assign(b.column.size(), Mat3::Zero());
+  for (int i = 0; i < a.size; ++i) {
+    for (int k = a.start[i]; k < a.start[i + 1]; ++k) {
+      const int j = a.column[k];
+      for (int e = p.start[j]; e < p.start[j + 1]; ++e) {
+        right.from.push_back(k);
+        right.to.push_back(entry(b, i, p.coarse[e]));
+        right.weight.push_back(p.weight[e]);
+      }
+    }
+  }
+}
+
+// C = P^T B: its pattern (coarse x coarse, each row with its diagonal) and the recipe of its
+// blocks from B's
+void Multigrid::left_product(const BlockMatrix& b, const Prolongation& p, int count, BlockMatrix& coarse, Recipe& left) {
+  const int fine = b.size;
+  std::vector<std::vector<int>> c_rows(count);
+  for (int i = 0; i < fine; ++i) {
+    for (int e = p.start[i]; e < p.start[i + 1]; ++e) {
+      std::vector<int>& row = c_rows[p.coarse[e]];
+      row.insert(row.end(), b.column.begin() + b.start[i], b.column.begin() + b.start[i + 1]);
+    }
+  }
+  for (int c = 0; c < count; ++c) {
+    std::vector<int>& row = c_rows[c];
+    row.push_back(c);  // a coarse block always has its diagonal
+    std::sort(row.begin(), row.end());
+    row.erase(std::unique(row.begin(), row.end()), row.end());
+  }
+  coarse = block_pattern(c_rows);
+  for (int i = 0; i < fine; ++i) {
+    for (int e = p.start[i]; e < p.start[i + 1]; ++e) {
+      for (int k = b.start[i]; k < b.start[i + 1]; ++k) {
+        left.from.push_back(k);
+        left.to.push_back(entry(coarse, p.coarse[e], b.column[k]));
+        left.weight.push_back(p.weight[e]);
+      }
+    }
+  }
+}
+
 // ---- multigrid: the hierarchy (once per cloth)
 
 Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vector<std::vector<int>>& edges,
@@ -348,60 +401,10 @@ Multigrid::Multigrid(const Eigen::SparseMatrix<double>& pattern, const std::vect
         for (int e = p.start[i]; e < p.start[i + 1]; ++e) p.weight[e] *= scale[i];
       }
     }
-    // B = A P: its pattern (fine rows, coarse columns) and the recipe from A's blocks
-    std::vector<std::vector<int>> b_rows(a.size);
-    for (int i = 0; i < a.size; ++i) {
-      for (int k = a.start[i]; k < a.start[i + 1]; ++k) {
-        const int j = a.column[k];
-        for (int e = p.start[j]; e < p.start[j + 1]; ++e) b_rows[i].push_back(p.coarse[e]);
-      }
-      std::sort(b_rows[i].begin(), b_rows[i].end());
-      b_rows[i].erase(std::unique(b_rows[i].begin(), b_rows[i].end()), b_rows[i].end());
-    }
-    BlockMatrix b;
-    b.size = a.size;
-    b.start.assign(1, 0);
-    for (const std::vector<int>& row : b_rows) {
-      b.column.insert(b.column.end(), row.begin(), row.end());
-      b.start.push_back(static_cast<int>(b.column.size()));
-    }
-    b.block.assign(b.column.size(), Mat3::Zero());
-    Recipe right;
-    for (int i = 0; i < a.size; ++i) {
-      for (int k = a.start[i]; k < a.start[i + 1]; ++k) {
-        const int j = a.column[k];
-        for (int e = p.start[j]; e < p.start[j + 1]; ++e) {
-          right.from.push_back(k);
-          right.to.push_back(entry(b, i, p.coarse[e]));
-          right.weight.push_back(p.weight[e]);
-        }
-      }
-    }
-    // C = P^T B: its pattern (coarse x coarse) and the recipe from B's blocks
-    std::vector<std::vector<int>> c_rows(count);
-    for (int i = 0; i < a.size; ++i) {
-      for (int e = p.start[i]; e < p.start[i + 1]; ++e) {
-        std::vector<int>& row = c_rows[p.coarse[e]];
-        row.insert(row.end(), b.column.begin() + b.start[i], b.column.begin() + b.start[i + 1]);
-      }
-    }
-    for (int c = 0; c < count; ++c) {
-      std::vector<int>& row = c_rows[c];
-      row.push_back(c);  // a coarse block always has its diagonal
-      std::sort(row.begin(), row.end());
-      row.erase(std::unique(row.begin(), row.end()), row.end());
-    }
-    BlockMatrix coarse = block_pattern(c_rows);
-    Recipe left;
-    for (int i = 0; i < a.size; ++i) {
-      for (int e = p.start[i]; e < p.start[i + 1]; ++e) {
-        for (int k = b.start[i]; k < b.start[i + 1]; ++k) {
-          left.from.push_back(k);
-          left.to.push_back(entry(coarse, p.coarse[e], b.column[k]));
-          left.weight.push_back(p.weight[e]);
-        }
-      }
-    }
+    BlockMatrix b, coarse;
+    Recipe right, left;
+    right_product(a, p, b, right);
+    left_product(b, p, count, coarse, left);
     graph = coarse_graph(graph, owner, count);
     prolongation_.push_back(std::move(p));
     product_.push_back(std::move(b));

@@ -11,8 +11,8 @@
 // also when a filter S (Baraff-Witkin's constraint projection) is applied after them:
 // S P^-1 S is symmetric positive semi-definite on the filtered space. With a filter, pass
 // update() the filtered matrix S A S + I - S (the same pattern, S being block diagonal)
-// rather than A: the V-cycle then approximates the constrained inverse
-// (7 iterations instead of 43 in ClothMultigrid.FilteredSolveMatchesDirectSolve).
+// rather than A: the V-cycle then approximates the constrained inverse, and the filtered
+// solve takes several times fewer iterations (ClothMultigrid.FilteredSolveMatchesDirectSolve).
 // Private to core/cloth.
 #pragma once
 
@@ -31,13 +31,12 @@ namespace simbake::cloth_detail {
 // The lower triangle of a symmetric 3x3-block matrix in single precision: block row i holds
 // A_ij for its columns j < i, ascending, then its diagonal A_ii last; the upper triangle is
 // its transpose (A_ji = A_ij^T). What the V-cycle's sweeps and the conjugate gradients'
-// products read (the latter when the solve's tolerance is 1e-5 or looser, cloth.cpp) through
+// products read (the latter when the solve's tolerance is 1e-5 or looser, integrators.cpp) through
 // lower_kernels.h: large systems are bound by memory traffic, and a preconditioner or a
 // solve to 1e-3 needs no more digits (the rounding is 1e-7 relative). Each block read serves
 // its row and, transposed, its column: a product reads half the blocks of full storage, and a
 // Gauss-Seidel sweep fused with the scatter of its residual (or of the rows it precedes) reads
-// them once where full storage read them twice or more. On the drape at 257 x 257 (66,049
-// blocks, 13 a row) the full single-precision copy was 31 MB, read 3 times an iteration.
+// them once where full storage read them twice or more.
 struct LowerBlocks {
   std::vector<int> start;     // (size + 1)
   std::vector<int> column;    // (entries) j < i ascending, then i
@@ -181,6 +180,10 @@ class Multigrid final : public Preconditioner {
   mutable std::vector<Eigen::VectorXd> rhs_, solution_, residual_;
 
   void update_smoother();
+  // the patterns of a coarser level's products and the recipes that fill their blocks:
+  // B = A P from A's blocks, then C = P^T B from B's (count coarse blocks)
+  static void right_product(const BlockMatrix& a, const Prolongation& p, BlockMatrix& b, Recipe& right);
+  static void left_product(const BlockMatrix& b, const Prolongation& p, int count, BlockMatrix& coarse, Recipe& left);
   // one V-cycle from `level` down: x = V b (level 0's b and x are apply's own vectors)
   void cycle(int level, const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
 };

@@ -61,36 +61,33 @@ int PatchTree::build(std::vector<int>& ids, int begin, int end, int parent, cons
   return n;
 }
 
-// Each node's boundary loop and centre, where the node is a disk: its boundary half-edges
-// (those whose twin is not in the node) chain into one loop through distinct vertices, and
-// V - E + F = 1
-void PatchTree::find_loops(const Triangles& triangles, const Points& x) {
-  const int count = static_cast<int>(order_.size());
-  const int vertices = static_cast<int>(x.rows());
-  // twins: the triangle across each edge of each triangle (by position in order_), -1 for
-  // none; a triangle on an edge of more than two triangles, or whose neighbour runs the
-  // edge the same way (inconsistent orientation), is in no disk
+namespace {
+
+// twins: the triangle across each edge of each triangle (by position in order), -1 for
+// none; a triangle on an edge of more than two triangles, or whose neighbour runs the
+// edge the same way (inconsistent orientation), is in no disk
+void find_twins(const Triangles& triangles, const std::vector<int>& order, std::vector<int>& twin, std::vector<char>& bad) {
+  const int count = static_cast<int>(order.size());
   std::vector<int> position(triangles.rows(), -1);
-  for (int p = 0; p < count; ++p) position[order_[p]] = p;
+  for (int p = 0; p < count; ++p) position[order[p]] = p;
   std::vector<std::pair<std::uint64_t, int>> half;  // (edge key, 3 p + j)
-  half.reserve(3 * static_cast<size_t>(count));
+  half.reserve(3 * order.size());
   for (int p = 0; p < count; ++p) {
-    const int t = order_[p];
+    const int t = order[p];
     for (int j = 0; j < 3; ++j) {
       const std::uint64_t a = triangles(t, j), b = triangles(t, (j + 1) % 3);
       half.emplace_back(std::min(a, b) << 32 | std::max(a, b), 3 * p + j);
     }
   }
   std::sort(half.begin(), half.end());
-  std::vector<int> twin(3 * static_cast<size_t>(count), -1);
-  std::vector<int> bad_before(count + 1, 0);  // prefix counts of bad triangles
-  std::vector<char> bad(count, 0);
+  twin.assign(3 * order.size(), -1);
+  bad.assign(count, 0);
   for (size_t i = 0; i < half.size();) {
     size_t j = i;
     while (j < half.size() && half[j].first == half[i].first) ++j;
     if (j - i == 2) {
       const int h0 = half[i].second, h1 = half[i + 1].second;
-      const int t0 = order_[h0 / 3], t1 = order_[h1 / 3];
+      const int t0 = order[h0 / 3], t1 = order[h1 / 3];
       if (triangles(t0, h0 % 3) == triangles(t1, h1 % 3)) {  // the same way along the edge
         bad[h0 / 3] = bad[h1 / 3] = 1;
       } else {
@@ -102,6 +99,20 @@ void PatchTree::find_loops(const Triangles& triangles, const Points& x) {
     }
     i = j;
   }
+}
+
+}  // namespace
+
+// Each node's boundary loop and centre, where the node is a disk: its boundary half-edges
+// (those whose twin is not in the node) chain into one loop through distinct vertices, and
+// V - E + F = 1
+void PatchTree::find_loops(const Triangles& triangles, const Points& x) {
+  const int count = static_cast<int>(order_.size());
+  const int vertices = static_cast<int>(x.rows());
+  std::vector<int> twin;
+  std::vector<char> bad;
+  find_twins(triangles, order_, twin, bad);
+  std::vector<int> bad_before(count + 1, 0);  // prefix counts of bad triangles
   for (int p = 0; p < count; ++p) bad_before[p + 1] = bad_before[p] + bad[p];
   std::vector<int> next(vertices, -1), seen(vertices, -1), on_loop(vertices, -1);
   for (int n = 0; n < static_cast<int>(nodes_.size()); ++n) {

@@ -35,9 +35,8 @@
 // is mapped one to one onto a plane, so none of its points meets another (the tree's header
 // gives the argument; PatchTree.FlatPatchesNeverMeetThemselves checks it by brute force). A
 // smooth sheet is flat in large patches, so only its bent places and where layers meet cost
-// pairs: on the drape at 129 x 129, 3.4 million candidates in 1.5 s against 17.5 million with
-// the uniform grids this replaced (benchmarks/cloth/run_simbake.py 129 --seconds 1.5). Like the
-// near pairs, a pair inside a flat patch is not repelled either: it is in-plane, the membrane's
+// pairs (a uniform grid over the boxes would find every neighbouring pair). Like the near
+// pairs, a pair inside a flat patch is not repelled either: it is in-plane, the membrane's
 // business. The pairs are kept, across passes and steps, while every vertex's start and end
 // stay in its box, and each flat patch is tested again over every pass whose velocities
 // changed on it: one no longer flat gives its pairs then. A vertex that leaves its box gets a
@@ -55,10 +54,8 @@
 // cost grows with the vertex count times the candidates a vertex has.
 //
 // Near pairs. When the thickness nears the edge length, most candidates are pairs of
-// neighbouring elements of a smooth sheet (at 257 x 257 on the drape, h = 5 mm against 8 mm
-// edges: 93% of the point-triangle and 48% of the edge-edge candidates, 42 a vertex in all
-// against 10 at 129 x 129), which can neither collide nor come closer than h across the
-// sheet there. Two kinds, each around an interior vertex q (one whose triangles close
+// neighbouring elements of a smooth sheet (most of them once the thickness is more than half
+// an edge), which can neither collide nor come closer than h across the sheet there. Two kinds, each around an interior vertex q (one whose triangles close
 // around it), its pivot: a point p next to q and a triangle of q's without p; the edge
 // across a triangle of q's from q and an edge of q outside that triangle. They are kept out of
 // the broad phase and are candidates in a pass only where q's triangles are not flat over
@@ -69,9 +66,8 @@
 // sheet starts free of crossings), so a point on one of q's edges cannot be inside another
 // triangle of q's, nor an edge across one of them cross another of q's edges: neither pair
 // meets during the step. A near pair in a flat place is in-plane, and its repulsion would
-// only resist compression, which is the membrane's business. On the drape at 257 x 257,
-// 137 near pairs a step were candidates on average (0.002 a vertex; 0.007 at 129 x 129),
-// and self-collision took 114 CPU s instead of 154 (benchmarks/cloth/run_simbake.py 257).
+// only resist compression, which is the membrane's business. A smooth sheet's pivots are
+// nearly all flat, so few near pairs are candidates in any step.
 // SelfCollision.NearPairsOfAFlatPivotNeverMeet checks the argument by brute force.
 //
 // Obstacles. Bodies the cloth must not pass through (a box's edge, a pole, a keyed mover) can
@@ -111,8 +107,8 @@ struct ObstacleMotion {
 };
 
 struct SelfCollisionSettings {
-  double thickness = 0.005;   // h (m): pairs closer than this are pushed apart
-  double friction = 0.3;      // Coulomb coefficient of the cloth on itself
+  double thickness = 0.0;     // h (m): pairs closer than this are pushed apart (the cloth's)
+  double friction = 0.0;      // Coulomb coefficient of the cloth on itself (the cloth's)
   int collision_passes = 4;   // impulse passes of continuous detection before impact zones
   int zone_iterations = 50;   // impact-zone rounds before the last resort (the cloth holds still)
   // (n) or null: for each vertex resting on a still surface this step (the ground, a static
@@ -122,9 +118,9 @@ struct SelfCollisionSettings {
   // whose vertices are all held so, or whose free ones would move by more than 4x the
   // change (a light corner left alone), is left to the impact zones. An impact zone whose rigid
   // motion would take one of its vertices into its surface holds still. Without this, layers
-  // landing on the heap shared their impulses with its bottom layer as if nothing were under
-  // it, and self-collision, which has the last word in a step, ended steps with a vertex up
-  // to 5.4 mm under the ground (the impulses) and 4.2 mm (the zones' rigid motion)
+  // landing on a heap share their impulses with its bottom layer as if nothing were under
+  // it, and self-collision, which has the last word in a step, ends steps with vertices under
+  // the ground (by the impulses, and by the zones' rigid motion)
   const std::vector<Vec3>* support = nullptr;
   // (obstacles) or null: each obstacle's motion over the step (the impact zones that hold an
   // obstacle's vertices move with it; without it, they hold still)
@@ -339,6 +335,10 @@ class SelfCollision {
   void measure(const Points& x, double h, bool all);
   void collision_contacts(const Points& x, const Points& v, double dt, const SelfCollisionSettings& settings,
                           std::vector<Contact>& out, SelfCollisionStatistics& stats);
+  // the earliest contact of one candidate over the step into `found`, if any (the pair marked
+  // clear otherwise); true when it took the continuous test
+  bool earliest_contact(int kind, Pair& pair, const Points& x, const Points& v, double dt, double tolerance,
+                        std::vector<Contact>& found) const;
 };
 
 }  // namespace simbake

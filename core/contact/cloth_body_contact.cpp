@@ -1,6 +1,6 @@
 // A cloth against the bodies and the ground (the interface is in cloth_body_contact.h).
 //
-// The cloth computes its internal forces and new velocities itself (cloth/cloth.h). The
+// The cloth computes its internal forces and new velocities itself (cloth/integrators.h). The
 // contacts then make the candidate positions x + dt v respect every body and the ground: a
 // cloth point (each vertex, and each edge's quarter points, so that a pole or a box's edge
 // cannot slip between vertices) whose candidate lies closer than the cloth's thickness to a
@@ -20,7 +20,7 @@
 // contacts against still surfaces are also held inside the cloth's implicit solve
 // (contact_constraints, apply_constraint_impulses), and a cloth pinched between two surfaces
 // holds them apart (hold_pinched_bodies). The world calls these in its cloth step
-// (world/cloth_stages.cpp), with strain limiting and self-collision in between.
+// (cloth/cloth_step.cpp), with strain limiting and self-collision in between.
 #include "contact/cloth_body_contact.h"
 
 #include "geometry/closest_points.h"
@@ -52,6 +52,9 @@ Vec3 surface_velocity(const ContactBodies& bodies, int b, const Vec3& p) {
 // the ground (b < 0), a static body or a kinematic one not moving in this step
 bool still_surface(const ContactBodies& bodies, int b) { return b < 0 || bodies.body(b).still; }
 
+// a body the pinches may move: dynamic and awake
+bool movable_body(const ContactBodies& bodies, int b) { return b >= 0 && !bodies.body(b).kinematic && !bodies.asleep(b); }
+
 // the quick reject: the body's bounding sphere, grown by h, misses the cloth's box `reach`
 bool out_of_reach(const ContactBody& body, const Box3& reach, double h) {
   const Vec3 nearest = body.center.cwiseMax(reach.min()).cwiseMin(reach.max());
@@ -59,8 +62,8 @@ bool out_of_reach(const ContactBody& body, const Box3& reach, double h) {
 }
 }  // namespace
 
-ClothBodyContact::ClothBodyContact(const Cloth& cloth, double friction, double thickness)
-    : friction_(friction), thickness_(thickness) {
+ClothBodyContact::ClothBodyContact(const Cloth& cloth)
+    : friction_(cloth.model().friction), thickness_(cloth.model().thickness) {
   inverse_mass_ = cloth.inverse_masses();
   edges_ = unique_edges(cloth.triangles());  // sorted
   const Triangles& triangles = cloth.triangles();
@@ -115,9 +118,8 @@ const BodyFeatures& ClothBodyContact::body_features(const ContactBodies& bodies,
 // goes to `contact` with the triangle's vertices and weights. The triangle grid is built for
 // the body (at the candidates as it reaches the body) over only the triangles near it: those
 // whose box, grown by the grid's margin, meets the features' box grown by a cell (a feature's
-// query reads only its own cell, so it finds what a grid over the whole cloth would). The
-// build is 9% of cloth_demo's first 60 frames in perf, about what the one grid over the
-// whole cloth per pass was
+// query reads only its own cell, so it finds what a grid over the whole cloth would), so
+// that a small body's grid costs little
 template <class Contact>
 bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies& bodies, int b, double dt,
                                         const Contact& contact) {
@@ -157,17 +159,32 @@ bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies&
       touched = true;
     }
   }
-  // the body's sharp edges against the cloth's edges: where a cloth edge passes within h of a
-  // body edge between the ends of both, the cloth edge's point there is pushed out to h, along
-  // the line joining the two (outside the body: that line leaves the edge on the outer side
-  // of one of its faces), or along the level set where it is inside. The feature points
-  // above, and the samples of each cloth edge against the level set, miss this: a cloth edge
-  // sweeping past a body edge nearly square to it (a box pushed into a sheet lying on the
-  // ground, its vertical edges crossing the sheet's edges between the points they are
-  // sampled at) put the body edge through the middle of a cloth triangle whose three
-  // corners stayed outside. The triangles near an edge come from the grid at points along it
-  // 2h apart (a cloth edge within h of the body edge has its triangle's box, grown by the
-  // grid's 2h, over one of them)
+  touched |= collide_feature_edges(cloth, bodies, b, dt, features, contact);
+  return touched;
+}
+
+// the body's sharp edges against the cloth's edges: where a cloth edge passes within h of a
+// body edge between the ends of both, the cloth edge's point there is pushed out to h, along
+// the line joining the two (outside the body: that line leaves the edge on the outer side
+// of one of its faces), or along the level set where it is inside. The feature points
+// above, and the samples of each cloth edge against the level set, miss this: a cloth edge
+// sweeping past a body edge nearly square to it (a box pushed into a sheet lying on the
+// ground, its vertical edges crossing the sheet's edges between the points they are
+// sampled at) put the body edge through the middle of a cloth triangle whose three
+// corners stayed outside. The triangles near an edge come from the grid at points along it
+// 2h apart (a cloth edge within h of the body edge has its triangle's box, grown by the
+// grid's 2h, over one of them)
+template <class Contact>
+bool ClothBodyContact::collide_feature_edges(const Cloth& cloth, const ContactBodies& bodies, int b, double dt,
+                                             const BodyFeatures& features, const Contact& contact) {
+  const SignedDistance& shape = *bodies.body(b).shape;
+  const double h = thickness_;
+  const Pose& pose = bodies.body(b).pose;
+  const auto candidate = [&](int k) {
+    return Vec3((cloth.positions().row(k) + dt * cloth.velocities().row(k)).transpose());
+  };
+  std::vector<int> near;
+  bool touched = false;
   std::vector<int> cloth_edges;
   for (const FeatureEdge& fe : features.edges) {
     // each triangle and cloth edge once per body edge (marked with a number distinct across
@@ -257,18 +274,16 @@ double ClothBodyContact::surface_friction(const ContactBodies& bodies, int b) co
 // the friction cone allowed), across the normal too (static friction). The rest of the cloth
 // then answers to the held vertices inside the solve. Without it, the solve lets a resting
 // vertex fall (or slide) with its neighbours, the contacts stop it alone after the solve, and
-// its edges stretch by their relative speed times the step, every step: the 33 x 33 drape at
-// 2000 N/m with strain limiting off rests at 19% strain (median over its last 2 s; 4.2% held;
-// benchmarks/cloth/strain_trace.py); a sheet laid on the sphere 9.2% (4.3% held, 1.2% by short
-// explicit steps; ClothWorld.ContactsHeldInTheSolve...).
-// Moving bodies are left to collide: held to a dynamic body's velocity before the body
-// had answered, a hammock's ball kept bouncing (0.5 m/s after 2.5 s, against < 0.15); held to
-// a keyed body's surface velocity at the step's start, a cape on a box spinning at 30 rad/s
-// went 4.5 mm into it, and static friction and landings against a keyed ball crossing a
-// curtain at 5 and 20 m/s sent vertices 17 m in a frame. Landings are not predicted: holding
-// the vertices that would come within h of a surface during the step (at x + dt v + dt^2 g)
-// to land at h flung vertices of the 257 x 257 drape as its corners hit the ground (the
-// self-collision search then took 12 GB and minutes a frame).
+// its edges stretch by their relative speed times the step, every step: a soft drape without
+// strain limiting rests several times more stretched than when held
+// (ClothWorld.ContactsHeldInTheSolve... measures it).
+// Moving bodies are left to collide: held to a dynamic body's velocity before the body had
+// answered, a ball in a hammock keeps bouncing; held to a keyed body's surface velocity at
+// the step's start, a cloth on a fast spinning box sinks into it, and static friction and
+// landings against a fast keyed body crossing a curtain fling its vertices. Landings are not
+// predicted: holding the vertices that would come within h of a surface during the step (at
+// x + dt v + dt^2 g) to land at h flings the vertices of a fine drape as its corners hit the
+// ground.
 void ClothBodyContact::contact_constraints(const Cloth& cloth, const ContactBodies& bodies,
                                            std::vector<ClothContactConstraint>& out) {
   const Points& x = cloth.positions();
@@ -326,8 +341,8 @@ void ClothBodyContact::apply_constraint_impulses(Cloth& cloth, const ContactBodi
     if (k.stick) {
       // (past the cone it slides from the next step on: the rest of the cloth has already
       // answered to it held, so giving the excess back to the vertex alone would hand it the
-      // pull of all the cloth it held; a light corner vertex holding a hanging sheet flew off
-      // at 40 m/s that way)
+      // pull of all the cloth it held, and a light corner vertex holding a hanging sheet would
+      // fly off)
       touches.stuck[k.vertex] = k.friction.norm() <= mu * k.impulse;
       continue;
     }
@@ -342,6 +357,113 @@ void ClothBodyContact::apply_constraint_impulses(Cloth& cloth, const ContactBodi
       v -= (stop / speed) * slip.transpose();
     }
   }
+}
+
+// one contact of a point of the cloth (a vertex, or a point along an edge: vertices `ids`
+// with weights `w`): push the point out to distance h, friction on its relative slip,
+// shared by its vertices in proportion to weight and inverse mass (pinned ones take none),
+// and the opposite momentum to the body (body < 0: the ground)
+void ClothBodyContact::contact_point(Points& v, ContactBodies& bodies, double dt, const int* ids, const double* w,
+                                     int count, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+  const double h = thickness_;
+  const Eigen::VectorXd& inverse_mass = inverse_mass_;
+  Touches& touches = touches_;
+  double denom = 0.0, weight = 0.0, lever = 0.0;
+  Vec3 point_velocity = Vec3::Zero();
+  for (int i = 0; i < count; ++i) {
+    denom += w[i] * w[i] * inverse_mass[ids[i]];
+    if (inverse_mass[ids[i]] > 0.0) weight += w[i];
+    point_velocity += w[i] * v.row(ids[i]).transpose();
+  }
+  if (denom <= 0.0) return;
+  // how much faster than the point its fastest vertex must move: 1 for a vertex or a point
+  // of a free triangle, 3 at the centroid of a triangle with two pinned vertices, and
+  // without bound as the point nears a pinned vertex (a lever about the pins: a pole's corner
+  // on a triangle by the pins would fling its free vertex). Past kMaxLever the
+  // pins hold the point: scaling the push down instead only spread the blow-up over the
+  // strain-collision passes, each pushing again while the point stays inside
+  for (int i = 0; i < count; ++i) lever = std::max(lever, w[i] * inverse_mass[ids[i]] / denom);
+  if (lever > kMaxLever) return;
+  const Vec3 relative = point_velocity - surface_velocity(bodies, body, xc);
+  const double vn = relative.dot(normal);
+  const double dvn = (h - phi) / dt;
+  if (dvn <= 0.0) return;
+  Vec3 slip = relative - vn * normal;
+  const double slip_speed = slip.norm();
+  const bool stuck = mu * dvn >= slip_speed;
+  if (slip_speed > 0.0) slip *= std::max(0.0, 1.0 - mu * dvn / slip_speed);
+  const Vec3 change = (vn + dvn) * normal + slip - relative;  // of the point's velocity
+  for (int i = 0; i < count; ++i) {
+    v.row(ids[i]) += (w[i] * inverse_mass[ids[i]] / denom) * change.transpose();
+    if (w[i] > 0.0 && inverse_mass[ids[i]] > 0.0 && still_surface(bodies, body)) {
+      touches.normal[ids[i]] += w[i] * normal;
+      touches.body[ids[i]] = body;
+      touches.stuck[ids[i]] = stuck;
+    }
+  }
+  if (body >= 0 && !bodies.body(body).kinematic && !bodies.asleep(body)) {
+    const Vec3 J = (weight / denom) * change;  // the cloth's momentum change; the body takes -J
+    bodies.apply_impulse(body, xc, -J);
+  }
+}
+
+// The cloth's points, edge points and the body's features against body b
+void ClothBodyContact::collide_with_body(Cloth& cloth, ContactBodies& bodies, int b, const Box3& reach, double dt) {
+  const Points& x = cloth.positions();
+  Points& v = cloth.velocities();
+  const std::vector<char>& pinned = cloth.pinned();
+  const double h = thickness_;
+  const int n = cloth.vertex_count();
+  auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc, const Vec3& normal,
+                           double phi, double mu) {
+    this->contact_point(v, bodies, dt, ids, w, count, body, xc, normal, phi, mu);
+  };
+  auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+    const double one = 1.0;
+    contact_point(&k, &one, 1, body, xc, normal, phi, mu);
+  };
+  const ContactBody& body = bodies.body(b);
+  if (!body.shape) return;
+  const Pose& pose = body.pose;
+  Box3 local = body.shape->bounds();
+  local.min().array() -= h;
+  local.max().array() += h;
+  if (out_of_reach(body, reach, h)) return;
+  const double mu = surface_friction(bodies, b);
+  bool touched = false;
+  for (int k = 0; k < n; ++k) {
+    if (pinned[k]) continue;
+    const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+    const Vec3 p = pose.apply_inverse(xc);
+    if (!local.contains(p)) continue;
+    Vec3 n_local;
+    const double phi = body.shape->phi_and_normal(p, n_local);
+    if (phi >= h) continue;
+    contact(k, b, xc, pose.rotation * n_local, phi, mu);
+    touched = true;
+  }
+  // points along the edges (a pole or a box's edge between vertices), at their quarters
+  for (const auto& e : edges_) {
+    if (pinned[e[0]] && pinned[e[1]]) continue;
+    const Vec3 a = (x.row(e[0]) + dt * v.row(e[0])).transpose();
+    const Vec3 d = (x.row(e[1]) + dt * v.row(e[1])).transpose() - a;
+    for (double s : {0.25, 0.5, 0.75}) {
+      const Vec3 xc = a + s * d;
+      const Vec3 p = pose.apply_inverse(xc);
+      if (!local.contains(p)) continue;
+      Vec3 n_local;
+      const double phi = body.shape->phi_and_normal(p, n_local);
+      if (phi >= h) continue;
+      const double w[2] = {1.0 - s, s};
+      contact_point(e.data(), w, 2, b, xc, pose.rotation * n_local, phi, mu);
+      touched = true;
+    }
+  }
+  // the body's corners and edges against the cloth's triangles
+  touched |= collide_features(cloth, bodies, b, dt,
+                              [&](const int* ids, const double* w, int count, const Vec3& xc, const Vec3& normal,
+                                  double phi) { contact_point(ids, w, count, b, xc, normal, phi, mu); });
+  if (touched && bodies.asleep(b)) bodies.wake(b);
 }
 
 void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
@@ -360,127 +482,35 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
   reach.min().array() -= h;
   reach.max().array() += h;
 
-  // one contact of a point of the cloth (a vertex, or a point along an edge: vertices `ids`
-  // with weights `w`): push the point out to distance h, friction on its relative slip,
-  // shared by its vertices in proportion to weight and inverse mass (pinned ones take none),
-  // and the opposite momentum to the body (body < 0: the ground)
-  const Eigen::VectorXd& inverse_mass = inverse_mass_;
-  Touches& touches = touches_;
-  auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc,
-                           const Vec3& normal, double phi, double mu) {
-    double denom = 0.0, weight = 0.0, lever = 0.0;
-    Vec3 point_velocity = Vec3::Zero();
-    for (int i = 0; i < count; ++i) {
-      denom += w[i] * w[i] * inverse_mass[ids[i]];
-      if (inverse_mass[ids[i]] > 0.0) weight += w[i];
-      point_velocity += w[i] * v.row(ids[i]).transpose();
-    }
-    if (denom <= 0.0) return;
-    // how much faster than the point its fastest vertex must move: 1 for a vertex or a point
-    // of a free triangle, 3 at the centroid of a triangle with two pinned vertices, and
-    // without bound as the point nears a pinned vertex (a lever about the pins: a flag pole's
-    // corner on a triangle by the pins sent its free vertex to 1e15 m/s). Past kMaxLever the
-    // pins hold the point: scaling the push down instead only spread the blow-up over the
-    // strain-collision passes, each pushing again while the point stays inside
-    for (int i = 0; i < count; ++i) lever = std::max(lever, w[i] * inverse_mass[ids[i]] / denom);
-    if (lever > kMaxLever) return;
-    const Vec3 relative = point_velocity - surface_velocity(bodies, body, xc);
-    const double vn = relative.dot(normal);
-    const double dvn = (h - phi) / dt;
-    if (dvn <= 0.0) return;
-    Vec3 slip = relative - vn * normal;
-    const double slip_speed = slip.norm();
-    const bool stuck = mu * dvn >= slip_speed;
-    if (slip_speed > 0.0) slip *= std::max(0.0, 1.0 - mu * dvn / slip_speed);
-    const Vec3 change = (vn + dvn) * normal + slip - relative;  // of the point's velocity
-    for (int i = 0; i < count; ++i) {
-      v.row(ids[i]) += (w[i] * inverse_mass[ids[i]] / denom) * change.transpose();
-      if (w[i] > 0.0 && inverse_mass[ids[i]] > 0.0 && still_surface(bodies, body)) {
-        touches.normal[ids[i]] += w[i] * normal;
-        touches.body[ids[i]] = body;
-        touches.stuck[ids[i]] = stuck;
-      }
-    }
-    if (body >= 0 && !bodies.body(body).kinematic && !bodies.asleep(body)) {
-      const Vec3 J = (weight / denom) * change;  // the cloth's momentum change; the body takes -J
-      bodies.apply_impulse(body, xc, -J);
-    }
-  };
-  auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
-    const double one = 1.0;
-    contact_point(&k, &one, 1, body, xc, normal, phi, mu);
-  };
-
-  for (int b = 0; b < bodies.count(); ++b) {
-    const ContactBody& body = bodies.body(b);
-    if (!body.shape) continue;
-    const Pose& pose = body.pose;
-    Box3 local = body.shape->bounds();
-    local.min().array() -= h;
-    local.max().array() += h;
-    if (out_of_reach(body, reach, h)) continue;
-    const double mu = surface_friction(bodies, b);
-    bool touched = false;
-    for (int k = 0; k < n; ++k) {
-      if (pinned[k]) continue;
-      const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
-      const Vec3 p = pose.apply_inverse(xc);
-      if (!local.contains(p)) continue;
-      Vec3 n_local;
-      const double phi = body.shape->phi_and_normal(p, n_local);
-      if (phi >= h) continue;
-      contact(k, b, xc, pose.rotation * n_local, phi, mu);
-      touched = true;
-    }
-    // points along the edges (a pole or a box's edge between vertices), at their quarters
-    for (const auto& e : edges_) {
-      if (pinned[e[0]] && pinned[e[1]]) continue;
-      const Vec3 a = (x.row(e[0]) + dt * v.row(e[0])).transpose();
-      const Vec3 d = (x.row(e[1]) + dt * v.row(e[1])).transpose() - a;
-      for (double s : {0.25, 0.5, 0.75}) {
-        const Vec3 xc = a + s * d;
-        const Vec3 p = pose.apply_inverse(xc);
-        if (!local.contains(p)) continue;
-        Vec3 n_local;
-        const double phi = body.shape->phi_and_normal(p, n_local);
-        if (phi >= h) continue;
-        const double w[2] = {1.0 - s, s};
-        contact_point(e.data(), w, 2, b, xc, pose.rotation * n_local, phi, mu);
-        touched = true;
-      }
-    }
-    // the body's corners and edges against the cloth's triangles
-    touched |= collide_features(cloth, bodies, b, dt,
-                                [&](const int* ids, const double* w, int count, const Vec3& xc, const Vec3& normal,
-                                    double phi) { contact_point(ids, w, count, b, xc, normal, phi, mu); });
-    if (touched && bodies.asleep(b)) bodies.wake(b);
-  }
+  for (int b = 0; b < bodies.count(); ++b) collide_with_body(cloth, bodies, b, reach, dt);
   if (const ContactGround* ground = bodies.ground()) {
     const double mu = surface_friction(bodies, -1);
     for (int k = 0; k < n; ++k) {
       if (pinned[k]) continue;
       const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
       const double phi = xc.y() - ground->height;
-      if (phi < h) contact(k, -1, xc, Vec3::UnitY(), phi, mu);
+      if (phi < h) {
+        const double one = 1.0;
+        contact_point(v, bodies, dt, &k, &one, 1, -1, xc, Vec3::UnitY(), phi, mu);
+      }
     }
   }
 }
 
 // Cloth pinched between two surfaces (two bodies, or a body and the ground): a vertex
 // between two surfaces facing each other whose gap along it is under the spacer below cannot
-// be pushed out of either without going into the other or into a layer of itself
-// (cloth_demo: the sheet falls, folded, into the gap between a resting sphere and a box;
-// the box's contacts, after the sphere's, and self-collision's last word left it up to
-// 12.7 mm inside the sphere), and its light vertices' momentum cannot push a heavy body
-// away. The rigid solver does not see the cloth, so here the pinch acts on the two bodies
-// as a rigid spacer of width (L + 1) h for the L layers of cloth between the two surfaces
-// there (h from each surface and between layers), and at least kPinchGap h (3h, two layers,
-// as where the sheet folds into the gap; a 2h spacer for one layer left 3.5 mm). L counts
-// the vertex's own layer and the cloth triangles the segment between the two surfaces
-// through the vertex crosses: with 3h whatever lay there, cloth_demo's ring came to rest
-// 13 mm above the ground on three layers of a fold, pressed them into 2.5 mm, and its
-// edges went through the top one at frames 87 and 95-97 (self-collision, holding the
-// layers apart, has the last word over the ring's contacts). Gauss-Seidel
+// be pushed out of either without going into the other or into a layer of itself (a sheet
+// falling, folded, into the gap between a resting sphere and a box: the box's contacts,
+// after the sphere's, and self-collision's last word leave it inside the sphere), and its
+// light vertices' momentum cannot push a heavy body away. The rigid solver does not see the
+// cloth, so here the pinch acts on the two bodies as a rigid spacer of width (L + 1) h for
+// the L layers of cloth between the two surfaces there (h from each surface and between
+// layers), and at least kPinchGap h (3h, two layers, as where a sheet folds into a gap; a 2h
+// spacer for one layer still leaves it inside). L counts the vertex's own layer and the
+// cloth triangles the segment between the two surfaces through the vertex crosses: with 3h
+// whatever lay there, a body resting on three layers of a fold presses them thinner than the
+// thickness, and its edges go through the top one (self-collision, holding the layers apart,
+// has the last word over the body's contacts). Gauss-Seidel
 // sweeps of equal and opposite impulses (split below into a real and a pseudo part) at the
 // vertex along n = (n_a - n_b) / |n_a - n_b| (n_a, n_b the surfaces' outward normals),
 // each bringing the bodies' relative velocity there, along n, to the speed that opens the
@@ -493,7 +523,6 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
   const Points& v = cloth.velocities();
   const double h = thickness_;
   const int n = cloth.vertex_count();
-  const auto movable_body = [&](int b) { return b >= 0 && !bodies.body(b).kinematic && !bodies.asleep(b); };
   // the bodies the cloth may touch, and whether any of them can move
   Box3 reach;
   for (int k = 0; k < n; ++k) reach.extend(Vec3((x.row(k) + dt * v.row(k)).transpose()));
@@ -506,21 +535,29 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
     if (!body.shape) continue;
     if (out_of_reach(body, reach, h)) continue;
     near.push_back(b);
-    any_movable = any_movable || movable_body(b);
+    any_movable = any_movable || movable_body(bodies, b);
   }
   if (!any_movable) return;
+  const std::vector<Pinch> pinches = find_pinches(cloth, bodies, dt, near, reach);
+  if (pinches.empty()) return;
+  separate_pinches(bodies, dt, near, pinches);
+}
+
+// The pinches of the cloth's vertices between the bodies `near` (and the ground), at the
+// candidates: pairs of surfaces facing each other whose gap along the vertex is under the
+// spacer the layers between them need
+std::vector<ClothBodyContact::Pinch> ClothBodyContact::find_pinches(const Cloth& cloth, const ContactBodies& bodies,
+                                                                    double dt, const std::vector<int>& near,
+                                                                    const Box3& reach) {
+  const Points& x = cloth.positions();
+  const Points& v = cloth.velocities();
+  const double h = thickness_;
+  const int n = cloth.vertex_count();
   const ContactGround* ground = bodies.ground();
   struct Touch {
     int body;  // kGround for the ground
     Vec3 normal;
     double phi;
-  };
-  struct Pinch {
-    Vec3 point;
-    int a, b;
-    Vec3 normal;  // from a towards b
-    double gap;   // phi_a + phi_b
-    double width; // of the spacer: (layers + 1) h, at least kPinchGap h
   };
   // the cloth's triangles at the candidates, for counting layers: each registered in the
   // cells its box grown by half the widest gap looked at meets, so that a triangle crossing
@@ -576,7 +613,7 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
       for (size_t j = i + 1; j < touches.size(); ++j) {
         const Touch& a = touches[i];
         const Touch& b = touches[j];
-        if (!movable_body(a.body) && !movable_body(b.body)) continue;
+        if (!movable_body(bodies, a.body) && !movable_body(bodies, b.body)) continue;
         if (a.phi + b.phi >= kPinchReach * h || a.normal.dot(b.normal) >= 0.0) continue;
         const double width =
             std::max(kPinchGap, layers(k, xc - a.phi * a.normal, xc - b.phi * b.normal) + 1.0) * h;
@@ -585,7 +622,13 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
       }
     }
   }
-  if (pinches.empty()) return;
+  return pinches;
+}
+
+// Equal and opposite impulses between the two surfaces of each pinch (see above), real and
+// pseudo, in Gauss-Seidel sweeps; the pseudo part then displaces the bodies
+void ClothBodyContact::separate_pinches(ContactBodies& bodies, double dt, const std::vector<int>& near,
+                                        const std::vector<Pinch>& pinches) {
   // two parts (split impulses): a real one that stops the surfaces closing in on the
   // vertex (inelastic: no bounce off the cloth), and a pseudo-velocity one, applied to the
   // bodies' positions only, that opens the gap: a body is put in place, not thrown
@@ -593,7 +636,7 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
   std::vector<Vec3> pseudo_v(body_count, Vec3::Zero()), pseudo_w(body_count, Vec3::Zero());
   std::vector<Mat3> inverse_inertia(body_count, Mat3::Zero());
   for (int b : near) {
-    if (movable_body(b)) inverse_inertia[b] = bodies.inverse_inertia(b);
+    if (movable_body(bodies, b)) inverse_inertia[b] = bodies.inverse_inertia(b);
   }
   const auto pseudo_at = [&](int b, const Vec3& p) -> Vec3 {
     return b < 0 ? Vec3::Zero() : Vec3(pseudo_v[b] + pseudo_w[b].cross(p - bodies.body(b).center));
@@ -601,7 +644,7 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
   const auto k_normal = [&](const Pinch& pinch) {
     Mat3 K = Mat3::Zero();
     for (int b : {pinch.a, pinch.b}) {
-      if (movable_body(b)) {
+      if (movable_body(bodies, b)) {
         K += impulse_matrix(bodies.body(b).inverse_mass, inverse_inertia[b], pinch.point - bodies.body(b).center);
       }
     }
@@ -622,7 +665,7 @@ void ClothBodyContact::hold_pinched_bodies(const Cloth& cloth, ContactBodies& bo
       const double real = std::max(0.0, closing) / kn, pseudo = std::max(0.0, target - opening) / kn;
       if (real <= 0.0 && pseudo <= 0.0) continue;
       for (const auto& [b, sign] : {std::pair<int, double>{pinch.b, 1.0}, std::pair<int, double>{pinch.a, -1.0}}) {
-        if (!movable_body(b)) continue;
+        if (!movable_body(bodies, b)) continue;
         const Vec3 r = pinch.point - bodies.body(b).center;
         const Vec3 J = sign * real * pinch.normal, P = sign * pseudo * pinch.normal;  // to body b
         bodies.apply_impulse(b, pinch.point, J);

@@ -2,18 +2,17 @@
 // holds, and the pinches it holds open between two surfaces. The method is at the top of
 // cloth_body_contact.cpp.
 //
-// The contact code does not see the world. It sees the bodies through ContactBodies: one
-// ContactBody per body, fixed over a cloth's step (shape, pose, bounding sphere, friction,
-// flags, the mesh for features), and the bodies' live velocity state, which every contact
-// reads and changes at once (an impulse on a body is there for the next contact to see):
-// the surface velocity at a point, an impulse at a point, waking a body, and, for the
-// pinches, the inverse inertia and a pseudo-velocity that moves a body's position only. The
-// world implements it over its own arrays (world/cloth_stages.cpp) and calls the stages of a
-// ClothBodyContact, one per cloth, which owns the cloth's contact state and scratch.
+// The contact code does not see the world. It sees the bodies through ContactBodies
+// (contact_bodies.h): each body as it is when the cloth's step begins, with the velocities
+// the contacts read and change as they go, and the record of what they did to the bodies,
+// which the world applies (world/cloth_coupling.h). The cloth's step (cloth/cloth_step.h)
+// calls the stages of a ClothBodyContact, one per cloth, which owns the cloth's contact state
+// and scratch.
 #pragma once
 
 #include "cloth/cloth.h"
 #include "contact/body_features.h"
+#include "contact/contact_bodies.h"
 #include "geometry/mesh.h"
 #include "levelset/signed_distance.h"
 #include "math/types.h"
@@ -25,50 +24,6 @@
 
 namespace simbake {
 
-// One body as a cloth's contacts see it: fixed over the contact stages of a cloth's step
-// (the pinches move bodies only at the very end of them)
-struct ContactBody {
-  const SignedDistance* shape = nullptr;  // level set, mesh coordinates; null: no contact
-  const TriangleMesh* mesh = nullptr;     // the closed mesh of a level-set body (its sharp
-                                          // edges are features), or null or empty
-  Pose pose;                              // mesh coordinates to world
-  Pose start_pose;                        // the same at the start of the cloth's step (for a
-                                          // cloth stepped over several body substeps, before the first)
-  Vec3 center = Vec3::Zero();             // centre of mass, world (m)
-  double bounding_radius = 0.0;           // about the centre of mass (m)
-  double friction = 0.5;                  // Coulomb coefficient
-  double inverse_mass = 0.0;              // (1/kg); 0 for kinematic bodies
-  bool kinematic = false;
-  bool still = false;                     // static, or kinematic and not moving this step
-};
-
-// The ground plane y = height, as the contacts see it
-struct ContactGround {
-  double height = 0.0;    // (m)
-  double friction = 0.5;  // Coulomb coefficient
-};
-
-// The bodies the cloth touches, by index (0 .. count()); the ground is not one of them
-class ContactBodies {
- public:
-  virtual ~ContactBodies() = default;
-  virtual int count() const = 0;
-  virtual const ContactBody& body(int b) const = 0;
-  virtual const ContactGround* ground() const = 0;  // null: no ground
-  // live: a sleeping body takes no impulse; waking b wakes its island
-  virtual bool asleep(int b) const = 0;
-  virtual void wake(int b) = 0;
-  // the velocity of body b's surface at world point p, now (m/s)
-  virtual Vec3 velocity_at(int b, const Vec3& p) const = 0;
-  // impulse J (N s) at world point p on dynamic body b: v += J / m, L += (p - center) x J
-  virtual void apply_impulse(int b, const Vec3& p, const Vec3& J) = 0;
-  // world I^-1 of dynamic body b now (1/(kg m^2))
-  virtual Mat3 inverse_inertia(int b) const = 0;
-  // moves dynamic body b's position only, by a pseudo-velocity (v m/s, omega rad/s) over dt:
-  // center += dt v, orientation turned by omega over dt; its velocities stay
-  virtual void displace(int b, const Vec3& v, const Vec3& omega, double dt) = 0;
-};
-
 // One cloth's contacts with the bodies and the ground, and what they keep from one step to
 // the next. The stages, in the order a cloth step calls them:
 //   contact_constraints        the contacts the implicit solve holds (before it), or
@@ -78,7 +33,8 @@ class ContactBodies {
 //   hold_pinched_bodies        bodies pinching the cloth held apart (last)
 class ClothBodyContact {
  public:
-  ClothBodyContact(const Cloth& cloth, double friction, double thickness);
+  // against the bodies with the cloth's friction, keeping its thickness from them
+  explicit ClothBodyContact(const Cloth& cloth);
 
   double friction() const { return friction_; }
   double thickness() const { return thickness_; }
@@ -108,7 +64,22 @@ class ClothBodyContact {
     std::vector<char> stuck;     // (nvert) friction stopped its slip: held in every direction
     std::vector<int> constrained_body;  // (constraints) scratch: each constraint's body
   };
+  // a cloth vertex pinched between two surfaces (hold_pinched_bodies)
+  struct Pinch {
+    Vec3 point;
+    int a, b;      // the two surfaces' bodies (-1: the ground)
+    Vec3 normal;   // from a towards b
+    double gap;    // phi_a + phi_b (m)
+    double width;  // of the spacer: (layers + 1) h, at least kPinchGap h (m)
+  };
+  std::vector<Pinch> find_pinches(const Cloth& cloth, const ContactBodies& bodies, double dt, const std::vector<int>& near,
+                                  const Box3& reach);
+  void separate_pinches(ContactBodies& bodies, double dt, const std::vector<int>& near, const std::vector<Pinch>& pinches);
   double surface_friction(const ContactBodies& bodies, int b) const;
+  // one contact of a point of the cloth (collide), and the cloth against one body
+  void contact_point(Points& v, ContactBodies& bodies, double dt, const int* ids, const double* w, int count, int body,
+                     const Vec3& xc, const Vec3& normal, double phi, double mu);
+  void collide_with_body(Cloth& cloth, ContactBodies& bodies, int b, const Box3& reach, double dt);
   // body b's features against the cloth (spaced for its edges), made at the first call
   const BodyFeatures& body_features(const ContactBodies& bodies, int b);
   // a body's corners and edges against the cloth's triangles, and its edges against the
@@ -116,6 +87,11 @@ class ClothBodyContact {
   // triangle's vertices, 2: an edge's)
   template <class Contact>
   bool collide_features(const Cloth& cloth, const ContactBodies& bodies, int b, double dt, const Contact& contact);
+  // the body's sharp edges against the cloth's edges (collide_features' second part: the grid
+  // is the one it built for the body)
+  template <class Contact>
+  bool collide_feature_edges(const Cloth& cloth, const ContactBodies& bodies, int b, double dt,
+                             const BodyFeatures& features, const Contact& contact);
 
   double friction_;                             // Coulomb coefficient against bodies and ground
   double thickness_;                            // distance kept from surfaces (and, by self-collision, itself) (m)

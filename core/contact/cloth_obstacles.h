@@ -4,9 +4,8 @@
 // The cloth's contacts (cloth_body_contact.h) hold its vertices, edge points and the
 // bodies' sharp features apart at the end of the step, in turn with strain limiting and
 // self-collision; self-collision has the last word, and its impulses could carry a cloth
-// edge back across a body's edge that the contacts had cleared (benchmarks/cloth/box_plow:
-// a keyed box pushed into a sheet on the ground, its edges through the sheet at 2 of 73
-// frames). As obstacles of infinite mass inside self-collision, the bodies' triangles take
+// edge back across a body's edge that the contacts had cleared (a keyed box pushed into a
+// sheet on the ground puts its edges through the sheet so). As obstacles of infinite mass inside self-collision, the bodies' triangles take
 // part in its continuous test and impact zones, so that the step's last word keeps the
 // cloth and the body's corners and edges from passing through each other.
 //

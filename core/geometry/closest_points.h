@@ -13,4 +13,8 @@ namespace simbake {
 // segment is its point; for parallel ones, one of their pairs of closest points
 std::pair<double, double> closest_on_segments(const Vec3& p0, const Vec3& p1, const Vec3& q0, const Vec3& q1);
 
+// Closest point of triangle abc to p, as barycentric weights (u, v, w) of a, b, c
+// (Ericson, "Real-Time Collision Detection", 5.1.5)
+Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
 }  // namespace simbake

@@ -1,8 +1,8 @@
 // Contact between two boxes, exactly: the separating-axis test and clipping.
 //
 // Sample points on a box find its faces against another body but miss an edge crossing an
-// edge between samples: two 0.5 m boxes with samples 0.125 m apart can cross edges 28 mm deep
-// while no sample is inside (measured on the 216-box pile). For two boxes the contact can be
+// edge between samples: two 0.5 m boxes with samples 0.125 m apart can cross edges by a good
+// part of that spacing while no sample is inside. For two boxes the contact can be
 // found exactly, as game engines do (Gottschalk, Lin and Manocha 1996 for the 15 separating
 // axes; Ericson, "Real-Time Collision Detection" 2005, 5.2 and 4.4, for the clipping):
 //  - the axis of least overlap among the 15 candidates (3 face normals of each box, 9 cross

@@ -16,9 +16,9 @@ struct Penetration {
   Vec3 n;      // unit normal of b's level set at x, world, pointing towards a
   double phi;  // b's signed distance at x (m), negative inside (positive: a speculative point)
   Vec3 local;  // the point in a's mesh frame: a surface sample, or a point of a box's exact
-               // contact (see World::box_pair_contact, World::box_edge_crossing)
+               // contact (see box_pair_contact, box_edge_crossing in narrow_phase.cpp)
   double s = 1.0;  // fraction of the step at which x, n and phi were taken (1: the candidates;
-                   // less for a fast pair, see World::sweep_tests); x is then where the point
+                   // less for a fast pair, see sweep_tests in narrow_phase.cpp); x is then where the point
                    // is at the candidates, so that lever arms are from the candidate centres
   // a point carried by both bodies (an edge crossing an edge, a box's exact contact): the
   // matching point of b in b's mesh frame, and the normal in b's frame; phi is then the

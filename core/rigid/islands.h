@@ -17,7 +17,7 @@ struct ImpulseLog {
   std::vector<int> stale;
   long long impulses = 0;
 };
-// The islands of an impulse stage (see World::resolve_contacts), rebuilt by each stage from its
+// The islands of an impulse stage (see rigid/contacts.cpp), rebuilt by each stage from its
 // items: the pairs with samples inside (collisions) or the contacts
 struct IslandScratch {
   int count = 0;

@@ -20,32 +20,19 @@ std::vector<SampleBlock> sample_blocks(const Points& samples) {
   return blocks;
 }
 
-Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state) {
+Pose mesh_pose(const RigidBodyDef& def, const Vec3& x, const Quat& q) {
   // a mesh point m sits at x + R(q) P^T (m - c): rotation R(q) P^T, translation x - R c
   Pose pose;
   // (an isotropic body's principal axes are its mesh axes: see RigidBodyDef::isotropic)
-  pose.rotation = def.isotropic ? state.q.toRotationMatrix() : Mat3(state.q.toRotationMatrix() * def.mesh_axes.transpose());
-  pose.translation = state.x - pose.rotation * def.center;
+  pose.rotation = def.isotropic ? q.toRotationMatrix() : Mat3(q.toRotationMatrix() * def.mesh_axes.transpose());
+  pose.translation = x - pose.rotation * def.center;
   return pose;
 }
 
-void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orientation,
-                   RigidBodyState& state) {
+void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orientation, Vec3& x, Quat& q) {
   const Quat mesh_q = orientation.normalized();
-  state.q = (mesh_q * Quat(def.mesh_axes)).normalized();
-  state.x = origin + mesh_q * def.center;
-}
-
-Mat3 world_inverse_inertia(const RigidBodyDef& def, const Quat& q) {
-  if (def.isotropic) return def.inverse_inertia[0] * Mat3::Identity();
-  const Mat3 R = q.toRotationMatrix();
-  return R * def.inverse_inertia.asDiagonal() * R.transpose();
-}
-
-Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state) {
-  if (def.isotropic) return def.inverse_inertia[0] * state.l;
-  const Vec3 body_l = state.q.conjugate() * state.l;
-  return state.q * Vec3(def.inverse_inertia.cwiseProduct(body_l));
+  q = (mesh_q * Quat(def.mesh_axes)).normalized();
+  x = origin + mesh_q * def.center;
 }
 
 Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt) {
@@ -53,9 +40,9 @@ Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double
   // Hamiltonian H_k = b_k^2 / (2 I_k) rotates the body about its k-th axis by dt b_k / I_k
   // (q <- q rot_k) and b the opposite way (b <- rot_k^-1 b); b_k itself is unchanged.
   // The splitting's error grows with the square of the angle turned per step: a step that
-  // turns the body more than kMaxTurn about any axis is taken as that many equal pieces (the
-  // 6 rad/s brick of benchmarks/rigid_spin.py then drifts as little at 1/120 s steps as at
-  // 1/240 s; a body at rest or tumbling slowly takes one piece, as before)
+  // turns the body more than kMaxTurn about any axis is taken as that many equal pieces (a
+  // fast spinner then drifts as little at long steps as at short ones; a body at rest or
+  // tumbling slowly takes one piece)
   // An isotropic body's omega = L / I is constant in the world: q <- exp(dt omega) q, exact,
   // one rotation instead of five per piece
   if (def.isotropic) return (quat_from_rotation_vector(dt * def.inverse_inertia[0] * l) * q).normalized();
@@ -85,10 +72,10 @@ Quat prescribed_rotation(const Quat& q, const Vec3& omega, double dt) {
   return (quat_from_rotation_vector(dt * omega) * q).normalized();
 }
 
-double kinetic_energy(const RigidBodyDef& def, const RigidBodyState& state) {
+double kinetic_energy(const RigidBodyDef& def, const Vec3& v, const Quat& q, const Vec3& l) {
   if (def.kinematic) return 0.0;
-  const double linear = 0.5 * state.v.squaredNorm() / def.inverse_mass;
-  return linear + 0.5 * state.l.dot(angular_velocity(def, state));
+  const double linear = 0.5 * v.squaredNorm() / def.inverse_mass;
+  return linear + 0.5 * l.dot(angular_velocity(def, q, l));
 }
 
 }  // namespace simbake

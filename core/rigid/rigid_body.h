@@ -79,18 +79,41 @@ struct Pose {
   Vec3 apply_inverse(const Vec3& p) const { return rotation.transpose() * (p - translation); }
 };
 
-// Where the body's mesh is in the world for the given state
-Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state);
+// Where the body's mesh is in the world for the centre of mass x and orientation q
+Pose mesh_pose(const RigidBodyDef& def, const Vec3& x, const Quat& q);
+inline Pose mesh_pose(const RigidBodyDef& def, const RigidBodyState& state) { return mesh_pose(def, state.x, state.q); }
 
-// The state whose mesh sits at the given pose (mesh origin and mesh orientation in world)
-void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orientation,
-                   RigidBodyState& state);
+// The centre of mass x and orientation q that put the mesh at the given pose (mesh origin and
+// mesh orientation in world)
+void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orientation, Vec3& x, Quat& q);
+inline void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orientation,
+                          RigidBodyState& state) {
+  set_mesh_pose(def, origin, orientation, state.x, state.q);
+}
 
-// World-space inverse inertia R diag(1/I) R^T (1/(kg m^2))
-Mat3 world_inverse_inertia(const RigidBodyDef& def, const Quat& q);
+// World-space inverse inertia R diag(1/I) R^T (1/(kg m^2)), from the principal inverse
+// moments (1/(kg m^2)) and whether they are equal (RigidBodyDef::isotropic)
+inline Mat3 world_inverse_inertia(const Vec3& inverse_inertia, bool isotropic, const Quat& q) {
+  if (isotropic) return inverse_inertia[0] * Mat3::Identity();
+  const Mat3 R = q.toRotationMatrix();
+  return R * inverse_inertia.asDiagonal() * R.transpose();
+}
+inline Mat3 world_inverse_inertia(const RigidBodyDef& def, const Quat& q) {
+  return world_inverse_inertia(def.inverse_inertia, def.isotropic, q);
+}
 
-// Angular velocity omega = I^-1 L (rad/s, world)
-Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state);
+// Angular velocity omega = I^-1 L (rad/s, world), likewise
+inline Vec3 angular_velocity(const Vec3& inverse_inertia, bool isotropic, const Quat& q, const Vec3& l) {
+  if (isotropic) return inverse_inertia[0] * l;
+  const Vec3 body_l = q.conjugate() * l;
+  return q * Vec3(inverse_inertia.cwiseProduct(body_l));
+}
+inline Vec3 angular_velocity(const RigidBodyDef& def, const Quat& q, const Vec3& l) {
+  return angular_velocity(def.inverse_inertia, def.isotropic, q, l);
+}
+inline Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& state) {
+  return angular_velocity(def, state.q, state.l);
+}
 
 // Torque-free rotation over dt with angular momentum L held fixed (Lie-Poisson splitting of
 // the free rigid body into exact rotations about the three principal axes, composed
@@ -105,6 +128,9 @@ Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double
 Quat prescribed_rotation(const Quat& q, const Vec3& omega, double dt);
 
 // Kinetic energy 1/2 M |v|^2 + 1/2 L.omega (J)
-double kinetic_energy(const RigidBodyDef& def, const RigidBodyState& state);
+double kinetic_energy(const RigidBodyDef& def, const Vec3& v, const Quat& q, const Vec3& l);
+inline double kinetic_energy(const RigidBodyDef& def, const RigidBodyState& state) {
+  return kinetic_energy(def, state.v, state.q, state.l);
+}
 
 }  // namespace simbake

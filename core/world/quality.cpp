@@ -55,16 +55,16 @@ PenetrationFigure body_penetration(const World& w) {
   // pairs whose bounding spheres meet (sweep along x), each body's samples in the other
   std::vector<int> order(n);
   std::iota(order.begin(), order.end(), 0);
-  const auto low = [&w](int i) { return w.body_state(i).x.x() - w.body_def(i).bounding_radius; };
+  const auto low = [&w](int i) { return w.rigid_data().x[i].x() - w.body_def(i).bounding_radius; };
   std::stable_sort(order.begin(), order.end(), [&](int i, int j) { return low(i) < low(j); });
   for (int p = 0; p < n; ++p) {
     const int i = order[p];
-    const Vec3& xi = w.body_state(i).x;
+    const Vec3& xi = w.rigid_data().x[i];
     const double ri = w.body_def(i).bounding_radius;
     for (int q = p + 1; q < n && low(order[q]) <= xi.x() + ri; ++q) {
       const int j = order[q];
       if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
-      if ((w.body_state(j).x - xi).norm() > ri + w.body_def(j).bounding_radius) continue;
+      if ((w.rigid_data().x[j] - xi).norm() > ri + w.body_def(j).bounding_radius) continue;
       // a dynamic body's samples first, so that on a tie it is named as the one inside
       const bool i_first = !w.body_def(i).kinematic;
       samples_inside(w, i_first ? i : j, i_first ? j : i, poses, deepest);
@@ -87,7 +87,7 @@ ClothQuality cloth_quality(const World& w, int c) {
   std::vector<int> near;
   std::vector<Pose> poses;
   for (int b = 0; b < w.body_count(); ++b) {
-    const Vec3& center = w.body_state(b).x;
+    const Vec3& center = w.rigid_data().x[b];
     if (!w.body_def(b).shape || box.isEmpty()) continue;
     if ((center.cwiseMax(box.min()).cwiseMin(box.max()) - center).norm() > w.body_def(b).bounding_radius) continue;
     near.push_back(b);
@@ -98,7 +98,7 @@ ClothQuality cloth_quality(const World& w, int c) {
     if (w.ground()) offer(deepest, w.ground()->height - p.y(), c, -1);
     for (size_t k = 0; k < near.size(); ++k) {
       const int b = near[k];
-      if ((p - w.body_state(b).x).norm() > w.body_def(b).bounding_radius) continue;
+      if ((p - w.rigid_data().x[b]).norm() > w.body_def(b).bounding_radius) continue;
       offer(deepest, -w.body_def(b).shape->phi(poses[k].apply_inverse(p)), c, b);
     }
   };

@@ -55,7 +55,8 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
     """The core World for the scene; `settings` go to _core.World (max_substep, threads, ...)."""
     world = _core.World(gravity=np.array(scene.gravity), **settings)
     if scene.ground is not None:
-        world.set_ground(scene.ground.height, scene.ground.friction, scene.ground.restitution)
+        world.set_ground(height=scene.ground.height, friction=scene.ground.friction,
+                         restitution=scene.ground.restitution)
     for index, (body, asset) in enumerate(zip(scene.bodies, assets)):
         volume = asset.mass_properties["volume"]
         mass = body.mass if body.mass is not None else body.density * volume
@@ -63,10 +64,12 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
         mesh = ({"mesh_vertices": asset.vertices, "mesh_triangles": asset.triangles}
                 if body.shape.kind == "mesh" and asset.level_set is not None else {})
         try:
-            world.add_body(asset.level_set, asset.samples, _mass_properties(body, asset, mass), mass,
-                           np.array(body.position), np.array(body.orientation),
-                           np.array(body.linear_velocity), np.array(body.angular_velocity),
-                           body.friction, body.restitution, body.kinematic, **mesh)
+            world.add_body(shape=asset.level_set, samples=asset.samples,
+                           mass_properties=_mass_properties(body, asset, mass), mass=mass,
+                           origin=np.array(body.position), orientation=np.array(body.orientation),
+                           linear_velocity=np.array(body.linear_velocity),
+                           angular_velocity=np.array(body.angular_velocity), friction=body.friction,
+                           restitution=body.restitution, kinematic=body.kinematic, **mesh)
         except ValueError as error:
             raise SceneError(scene.source, f"bodies[{index}]", str(error)) from None
         if body.keys:
@@ -75,10 +78,12 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
                                       np.array([k.orientation for k in body.keys]))
     for index, (cloth, asset) in enumerate(zip(scene.cloths, cloths)):
         try:
-            world.add_cloth(asset.vertices, asset.triangles, cloth.area_density, cloth.model,
-                            cloth.stretch_stiffness, cloth.poisson_ratio, cloth.bend_stiffness,
-                            cloth.damping, cloth.strain_limit, cloth.compression, list(cloth.pinned),
-                            cloth.integrator, cloth.friction, cloth.thickness,
+            world.add_cloth(rest=asset.vertices, triangles=asset.triangles, area_density=cloth.area_density,
+                            model=cloth.model, stretch_stiffness=cloth.stretch_stiffness,
+                            poisson_ratio=cloth.poisson_ratio, bend_stiffness=cloth.bend_stiffness,
+                            damping=cloth.damping, strain_limit=cloth.strain_limit,
+                            compression=cloth.compression, pinned=list(cloth.pinned),
+                            integrator=cloth.integrator, friction=cloth.friction, thickness=cloth.thickness,
                             self_collision=cloth.self_collision)
         except ValueError as error:
             raise SceneError(scene.source, f"cloths[{index}]", str(error)) from None

@@ -32,6 +32,15 @@ inline BodyDesc box_body(const Vec3& size, double mass, const Vec3& origin, int 
 
 inline double degrees(double radians) { return radians * 180.0 / M_PI; }
 
+// A cloth's description with its contact settings: friction against bodies and the ground,
+// the thickness it keeps from them (m), and whether it collides with itself
+inline ClothDesc with_contacts(ClothDesc desc, double friction, double thickness, bool self_collision = true) {
+  desc.friction = friction;
+  desc.thickness = thickness;
+  desc.self_collision = self_collision;
+  return desc;
+}
+
 // A flat grid cloth of nx x nz vertices spanning size_x x size_z in the XZ plane from the
 // corner `origin`, vertex (i, j) at index j * nx + i; each cell split along (i, j)-(i+1, j+1)
 // as the pipeline's grid_mesh does

@@ -19,16 +19,16 @@ from simbake import _core
 def one_body_world() -> "_core.World":
     world = _core.World()
     vertices, _ = _core.box_mesh(np.array([1.0, 1.0, 1.0]), 1)
-    world.add_body(_core.LevelSet.box(np.array([1.0, 1.0, 1.0])), vertices,
-                   _core.box_mass_properties(np.array([1.0, 1.0, 1.0])), 1.0,
-                   np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))
+    world.add_body(shape=_core.LevelSet.box(np.array([1.0, 1.0, 1.0])), samples=vertices,
+                   mass_properties=_core.box_mass_properties(np.array([1.0, 1.0, 1.0])), mass=1.0,
+                   origin=np.zeros(3), orientation=np.array([1.0, 0.0, 0.0, 0.0]))
     return world
 
 
 def one_cloth_world() -> "_core.World":
     world = _core.World()
     rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    world.add_cloth(rest, np.array([[0, 2, 1]], dtype=np.int32))
+    world.add_cloth(rest=rest, triangles=np.array([[0, 2, 1]], dtype=np.int32))
     return world
 
 
@@ -38,7 +38,6 @@ BAD_INDICES = [1, 99, 10**6, -1, -5, 2**40]
 @pytest.mark.parametrize("index", BAD_INDICES)
 @pytest.mark.parametrize("method, world, what", [
     ("asleep", one_body_world, "body"),
-    ("body_state", one_body_world, "body"),
     ("cloth_max_strain", one_cloth_world, "cloth"),
     ("cloth_state", one_cloth_world, "cloth"),
 ])
@@ -50,7 +49,7 @@ def test_index_out_of_range_is_index_error(method, world, what, index):
 def test_valid_indices_still_answer():
     world = one_body_world()
     assert world.asleep(0) is False
-    assert world.body_state(0)["center_of_mass"].shape == (3,)
+    assert world.body_states()["center_of_mass"].shape == (1, 3)
     cloth = one_cloth_world()
     assert cloth.cloth_max_strain(0) == pytest.approx(0.0, abs=1e-12)
 
@@ -113,7 +112,7 @@ def test_random_arguments_never_crash():
     body, cloth = one_body_world(), one_cloth_world()
     calls = [
         lambda w: w.asleep(rng.choice(ints)),
-        lambda w: w.body_state(rng.choice(ints)),
+        lambda w: w.body_states(),
         lambda w: w.cloth_state(rng.choice(ints)),
         lambda w: w.cloth_max_strain(rng.choice(ints)),
         lambda w: w.step(rng.choice(floats)),
@@ -122,7 +121,8 @@ def test_random_arguments_never_crash():
         lambda w: w.automatic_cloth_steps(rng.choice(floats)),
         lambda w: w.set_kinematic_track(rng.choice(ints), [rng.choice(floats)], np.zeros((1, 3)),
                                         np.array([[1.0, 0.0, 0.0, 0.0]])),
-        lambda w: w.set_ground(rng.choice(floats), rng.choice(floats), rng.choice(floats)),
+        lambda w: w.set_ground(height=rng.choice(floats), friction=rng.choice(floats),
+                               restitution=rng.choice(floats)),
     ]
     outcomes = set()
     for _ in range(400):
@@ -139,10 +139,45 @@ def test_body_mesh_is_checked():
     """A body's mesh (for its sharp edges against cloth) comes whole: both arrays, indices in range."""
     size = np.array([1.0, 1.0, 1.0])
     vertices, triangles = _core.box_mesh(size, 1)
-    args = (_core.LevelSet.box(size), vertices, _core.box_mass_properties(size), 1.0, np.zeros(3),
-            np.array([1.0, 0.0, 0.0, 0.0]))
+    args = dict(shape=_core.LevelSet.box(size), samples=vertices, mass_properties=_core.box_mass_properties(size),
+                mass=1.0, origin=np.zeros(3), orientation=np.array([1.0, 0.0, 0.0, 0.0]))
     with pytest.raises(ValueError, match="mesh_vertices and mesh_triangles"):
-        _core.World().add_body(*args, mesh_vertices=vertices)
+        _core.World().add_body(**args, mesh_vertices=vertices)
     with pytest.raises(ValueError):
-        _core.World().add_body(*args, mesh_vertices=vertices, mesh_triangles=triangles + len(vertices))
-    assert _core.World().add_body(*args, mesh_vertices=vertices, mesh_triangles=triangles) == 0
+        _core.World().add_body(**args, mesh_vertices=vertices, mesh_triangles=triangles + len(vertices))
+    assert _core.World().add_body(**args, mesh_vertices=vertices, mesh_triangles=triangles) == 0
+
+
+@pytest.mark.parametrize("threads", [-1, 1025, 65536, 100000, 2**31 - 1])
+def test_threads_out_of_range_is_a_value_error(threads):
+    """Issue 30: World(threads=100000).step_frame() crashed inside TBB. The core takes 0 (every
+    CPU) to MAX_THREADS (1024), the cap `simbake bake --threads` has too."""
+    assert _core.MAX_THREADS == 1024
+    with pytest.raises(ValueError, match="threads must be in"):
+        _core.World(threads=threads)
+    with pytest.raises(ValueError, match="threads must be in"):
+        _core.World(_core.WorldSettings(threads=threads))
+
+
+@pytest.mark.parametrize("threads", [0, 1, 2, 1024])
+def test_threads_in_range_step(threads):
+    world = _core.World(threads=threads)
+    world.add_body(shape=_core.LevelSet.sphere(0.5), samples=_core.sphere_mesh(0.5, 2)[0],
+                   mass_properties=_core.sphere_mass_properties(0.5), mass=1.0, origin=np.array([0.0, 2.0, 0.0]))
+    assert world.step_frame(1 / 24) >= 1
+    assert world.settings.threads == threads
+
+
+def test_settings_and_descriptions_take_their_fields_by_keyword():
+    """Every field is a keyword; an unknown one is a TypeError naming it, and none is positional."""
+    with pytest.raises(TypeError, match="WorldSettings has no field 'substep'"):
+        _core.WorldSettings(substep=0.01)
+    with pytest.raises(TypeError, match="ClothDesc has no field 'frictoin'"):
+        _core.ClothDesc(frictoin=0.2)
+    with pytest.raises(TypeError):
+        _core.World(_core.WorldSettings(), threads=1)  # settings or its fields, not both
+    with pytest.raises(TypeError):
+        _core.GroundDef(0.0)
+    assert _core.World(gravity=np.zeros(3), sleep_time=0.0).settings.sleep_time == 0.0
+    with pytest.raises(ValueError, match="unknown choice 'mesh'"):
+        _core.ClothDesc(model="mesh")

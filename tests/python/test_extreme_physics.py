@@ -33,21 +33,28 @@ MAX_RECOVERY_SPEED = 0.5           # WorldSettings::max_recovery_speed (m/s)
 # helpers
 
 
+def body_state(w, i: int) -> dict:
+    """Body i's state, from the world's state arrays."""
+    return {key: values[i] for key, values in w.body_states().items()}
+
+
 def add_box(w, size, mass, origin, orientation=IDENTITY, **kwargs) -> int:
     size = np.asarray(size, dtype=float)
-    return w.add_body(_core.LevelSet.box(size), _core.box_mesh(size, 3)[0], _core.box_mass_properties(size),
-                      float(mass), np.asarray(origin, dtype=float), np.asarray(orientation, dtype=float), **kwargs)
+    return w.add_body(shape=_core.LevelSet.box(size), samples=_core.box_mesh(size, 3)[0],
+                      mass_properties=_core.box_mass_properties(size), mass=float(mass),
+                      origin=np.asarray(origin, dtype=float), orientation=np.asarray(orientation, dtype=float),
+                      **kwargs)
 
 
 def add_sphere(w, radius, mass, origin, **kwargs) -> int:
-    return w.add_body(_core.LevelSet.sphere(radius), _core.sphere_mesh(radius, 8)[0],
-                      _core.sphere_mass_properties(radius), float(mass), np.asarray(origin, dtype=float),
-                      IDENTITY, **kwargs)
+    return w.add_body(shape=_core.LevelSet.sphere(radius), samples=_core.sphere_mesh(radius, 8)[0],
+                      mass_properties=_core.sphere_mass_properties(radius), mass=float(mass),
+                      origin=np.asarray(origin, dtype=float), orientation=IDENTITY, **kwargs)
 
 
 def kinetic_energy(w, i, mass=1.0) -> float:
     """1/2 m v.v + 1/2 omega.L: translation and spin, from the state alone."""
-    s = w.body_state(i)
+    s = body_state(w, i)
     v, omega, L = (np.asarray(s[k]) for k in ("linear_velocity", "angular_velocity", "angular_momentum"))
     return 0.5 * mass * float(v @ v) + 0.5 * float(omega @ L)
 
@@ -93,7 +100,7 @@ def test_square_face_on_hit_has_no_sideways_speed_or_spin(speed, friction):
     # symmetric sample positions leave round-off only: 1e-9 of the impact speed allowed
     for k in range(3):  # impact at three points of a substep
         w, box, before, most = shoot(speed, gap=1.0 + k / 3 * speed * FRAME_DT, friction=friction)
-        s = w.body_state(box)
+        s = body_state(w, box)
         v, omega = np.asarray(s["linear_velocity"]), np.asarray(s["angular_velocity"])
         assert np.abs(v[1:]).max() <= 1e-9 * speed, f"sideways {v}"
         assert np.linalg.norm(omega) * BOX <= 1e-9 * speed, f"spin {omega}"
@@ -107,7 +114,7 @@ def test_square_hit_under_gravity_slides_down_the_wall_only():
     # rows of an ldlt solve, so z keeps round-off of the 1000 m/s: 1e-6 of it allowed (1 mm/s,
     # measured 1.6e-6 m/s). Down the wall it falls no faster than free fall: |v_y| <= g t
     w, box, _, _ = shoot(1000.0, gravity=(0.0, -9.81, 0.0))
-    s = w.body_state(box)
+    s = body_state(w, box)
     v = np.asarray(s["linear_velocity"])
     assert abs(v[2]) <= 1e-6 * 1000.0
     assert abs(s["center_of_mass"][2]) <= 1e-6
@@ -140,7 +147,7 @@ def test_no_impact_gains_energy(shot):
     speed = shot.pop("speed")
     w, box, before, most = shoot(speed, **shot)
     assert most <= before * (1 + 1e-9), f"gained {most / before - 1:.3g} of the energy"
-    assert w.body_state(box)["center_of_mass"][0] < -0.05  # and it never went through
+    assert body_state(w, box)["center_of_mass"][0] < -0.05  # and it never went through
 
 
 # --------------------------------------------------------------------------------------------
@@ -160,7 +167,7 @@ def test_no_tunnelling_at_any_speed(shape, wall, speed, substeps):
     for k in range(5):
         w, body, before, most = shoot(speed, wall=wall, gap=1.0 + k / 5 * speed * FRAME_DT, shape=shape,
                                       restitution=0.5, friction=0.5, substeps=substeps)
-        s = w.body_state(body)
+        s = body_state(w, body)
         x, v = s["center_of_mass"][0], np.asarray(s["linear_velocity"])
         assert x <= near + 1e-9, f"phase {k}: ended at x = {x}, past the wall's near face"
         assert v[0] == pytest.approx(-0.5 * speed, rel=1e-6), f"phase {k}: v = {v}"
@@ -201,7 +208,7 @@ def test_deep_overlaps_never_explode(layout, gravity):
         w.step_frame(FRAME_DT)
         fall = 9.81 * frame * FRAME_DT if gravity else 0.0
         for i in range(w.body_count):
-            s = w.body_state(i)
+            s = body_state(w, i)
             point = np.linalg.norm(s["linear_velocity"]) + np.linalg.norm(s["angular_velocity"]) * CIRCUMRADIUS * size
             assert point <= limit + fall, f"frame {frame}: box {i} at {point:.3g} m/s"
         moved = np.linalg.norm(np.asarray(w.mesh_poses()[0]) - start, axis=1).max()

@@ -2,6 +2,9 @@
 // tilted ground, resting without sinking or jitter, kinematic bodies, determinism.
 #include <gtest/gtest.h>
 
+#include <set>
+#include <string>
+
 #include "test_support.h"
 
 #include <vector>
@@ -164,7 +167,7 @@ TEST(World, AutomaticSubstepsFollowSpeed) {
   World world;
   world.add_body(sphere_body(0.1, 1.0, Vec3::Zero()));
   const int resting = world.automatic_substeps(1.0 / 24.0);
-  world.body_state(0).v = Vec3(100.0, 0.0, 0.0);
+  world.rigid_data().v[0] = Vec3(100.0, 0.0, 0.0);
   const int fast = world.automatic_substeps(1.0 / 24.0);
   EXPECT_EQ(resting, 5);  // the 1/120 s ceiling
   // 100 m/s over 1/24 s is 4.17 m; 0.2 of the 0.2 m thickness per substep -> 105 substeps
@@ -239,4 +242,37 @@ TEST(World, KeyedPlatformCarriesABoxWithCoulombSlip) {
   for (int f = 0; f < 36; ++f) world.step_frame(1.0 / 24.0);  // t = 3 s, stopped
   EXPECT_NEAR(world.body_state(1).x.x() - 2.0, 0.0, 0.1 * slip);
   EXPECT_NEAR(world.body_state(1).x.y(), 0.25, 2e-3);
+}
+
+// The worker threads are checked when the world is built: 0 (every CPU) to kMaxThreads; a
+// count past it is refused (TBB's arena crashed at 100,000), whatever steps follow
+TEST(World, ThreadsOutOfRangeAreRefused) {
+  for (int threads : {-1, kMaxThreads + 1, 100000}) {
+    WorldSettings settings;
+    settings.threads = threads;
+    EXPECT_THROW(World{settings}, std::invalid_argument) << threads;
+  }
+  for (int threads : {0, 1, 2, kMaxThreads}) {
+    WorldSettings settings;
+    settings.threads = threads;
+    World world(settings);
+    world.add_body(test::sphere_body(0.5, 1.0, Vec3(0.0, 2.0, 0.0)));
+    EXPECT_GE(world.step_frame(1.0 / 24.0), 1) << threads;
+  }
+}
+
+// Every stage has its name in the profile, and the kinematic bodies' move is timed apart
+// from the broad phase
+TEST(World, ProfileNamesEveryStage) {
+  std::set<std::string> names;
+  for (const char* name : kStageNames) names.insert(name);
+  EXPECT_EQ(names.size(), static_cast<size_t>(kStageCount));
+  EXPECT_EQ(std::string(kStageNames[static_cast<int>(Stage::kKinematicBodies)]), "kinematic_bodies");
+  EXPECT_EQ(std::string(kStageNames[static_cast<int>(Stage::kBroadPhase)]), "broad_phase");
+  EXPECT_EQ(std::string(kStageNames[static_cast<int>(Stage::kStatistics)]), "statistics");
+  World world;
+  world.add_body(test::sphere_body(0.5, 1.0, Vec3(0.0, 2.0, 0.0)));
+  world.step_frame(1.0 / 24.0);
+  EXPECT_GT(world.profile()[Stage::kBroadPhase], 0.0);
+  EXPECT_GT(world.profile()[Stage::kKinematicBodies], 0.0);
 }

@@ -1,5 +1,5 @@
 // A cloth against bodies and the ground (contact/cloth_body_contact.h), without a World: the
-// bodies are a plain ContactBodies written here. A free cloth vertex whose candidate x + dt v
+// bodies are a ContactBodies filled here. A free cloth vertex whose candidate x + dt v
 // lies inside the ground or a sphere gets the normal velocity change dv_n = (h - phi) / dt,
 // which leaves its candidate exactly at the thickness h, and Coulomb friction takes mu dv_n
 // off its slip (or stops it); against a dynamic body the cloth's momentum change goes to the
@@ -18,44 +18,17 @@ using namespace simbake;
 
 namespace {
 
-// Bodies as plain arrays: a dynamic body's angular velocity is I^-1 L with a constant I^-1
-class PlainBodies final : public ContactBodies {
- public:
-  std::vector<ContactBody> bodies;
-  std::vector<Vec3> v, l;              // (nbody) linear velocity (m/s), angular momentum (N m s)
-  std::vector<Mat3> inverse_inertia_;  // (nbody) world I^-1 (1/(kg m^2))
-  std::vector<char> asleep_;
-  std::optional<ContactGround> ground_;
-
-  void add(const ContactBody& body, const Mat3& inverse_inertia) {
-    bodies.push_back(body);
-    v.push_back(Vec3::Zero());
-    l.push_back(Vec3::Zero());
-    inverse_inertia_.push_back(inverse_inertia);
-    asleep_.push_back(0);
-  }
-  int count() const override { return static_cast<int>(bodies.size()); }
-  const ContactBody& body(int b) const override { return bodies[b]; }
-  const ContactGround* ground() const override { return ground_ ? &*ground_ : nullptr; }
-  bool asleep(int b) const override { return asleep_[b] != 0; }
-  void wake(int b) override { asleep_[b] = 0; }
-  Vec3 velocity_at(int b, const Vec3& p) const override {
-    return v[b] + (inverse_inertia_[b] * l[b]).cross(p - bodies[b].center);
-  }
-  void apply_impulse(int b, const Vec3& p, const Vec3& J) override {
-    v[b] += bodies[b].inverse_mass * J;
-    l[b] += (p - bodies[b].center).cross(J);
-  }
-  Mat3 inverse_inertia(int b) const override { return inverse_inertia_[b]; }
-  void displace(int b, const Vec3& velocity, const Vec3&, double dt) override {
-    bodies[b].center += dt * velocity;
-    bodies[b].pose.translation += dt * velocity;
-  }
-};
+// Adds a body whose inverse inertia is `inverse_moment` (1/(kg m^2)) about every axis, at rest
+void add(ContactBodies& bodies, ContactBody body, double inverse_moment, bool asleep = false) {
+  body.isotropic = true;
+  body.inverse_inertia = Vec3::Constant(inverse_moment);
+  bodies.add(body, Vec3::Zero(), Vec3::Zero(), asleep);
+}
 
 // One triangle: vertex 0 free at `free`, vertices 1 and 2 pinned 1 m above it, so that
-// only vertex 0 comes near a surface (its edges' quarter points stay 0.25 m away)
-Cloth one_free_vertex(const Vec3& free) {
+// only vertex 0 comes near a surface (its edges' quarter points stay 0.25 m away); with this
+// friction against the surfaces, keeping this thickness (m) from them
+Cloth one_free_vertex(const Vec3& free, double friction, double thickness) {
   ClothDesc desc;
   desc.rest.resize(3, 3);
   desc.rest.row(0) = free.transpose();
@@ -64,6 +37,8 @@ Cloth one_free_vertex(const Vec3& free) {
   desc.triangles.resize(1, 3);
   desc.triangles << 0, 1, 2;
   desc.pinned = {1, 2};
+  desc.friction = friction;
+  desc.thickness = thickness;
   return Cloth(desc);
 }
 
@@ -89,11 +64,11 @@ TEST(ClothBodyContact, GroundStopsAVertexAtTheThicknessWithCoulombFriction) {
   const double h = 0.005;
   for (double dt : {1e-3, 4e-3, 1e-2}) {
     for (double slip : {3.0, 0.3}) {
-      Cloth cloth = one_free_vertex(Vec3(0.0, h + dt, 0.0));
+      Cloth cloth = one_free_vertex(Vec3(0.0, h + dt, 0.0), 0.5, h);
       cloth.velocities().row(0) << slip, -2.0, 0.0;
-      ClothBodyContact contact(cloth, 0.5, h);
-      PlainBodies bodies;
-      bodies.ground_ = ContactGround{0.0, 0.5};
+      ClothBodyContact contact(cloth);
+      ContactBodies bodies;
+      bodies.set_ground(ContactGround{0.0, 0.5});
       contact.collide(cloth, bodies, dt);
       const Vec3 v = cloth.velocities().row(0).transpose();
       EXPECT_NEAR(v.y(), -1.0, 1e-12) << dt;
@@ -112,11 +87,11 @@ TEST(ClothBodyContact, StaticSphereStopsAVertexAtTheThickness) {
   const double h = 0.005, r = 0.5;
   const SphereDistance shape(r);
   for (double dt : {1e-3, 4e-3, 1e-2}) {
-    Cloth cloth = one_free_vertex(Vec3(0.0, r + h + dt, 0.0));
+    Cloth cloth = one_free_vertex(Vec3(0.0, r + h + dt, 0.0), 0.5, h);
     cloth.velocities().row(0) << 0.0, -2.0, 0.0;
-    ClothBodyContact contact(cloth, 0.5, h);
-    PlainBodies bodies;
-    bodies.add(sphere(shape, r, Vec3::Zero(), 0.0), Mat3::Zero());
+    ClothBodyContact contact(cloth);
+    ContactBodies bodies;
+    add(bodies, sphere(shape, r, Vec3::Zero(), 0.0), 0.0);
     contact.collide(cloth, bodies, dt);
     const Vec3 candidate = (cloth.positions().row(0) + dt * cloth.velocities().row(0)).transpose();
     EXPECT_NEAR(candidate.norm() - r, h, 1e-14) << dt;
@@ -131,16 +106,17 @@ TEST(ClothBodyContact, StaticSphereStopsAVertexAtTheThickness) {
 TEST(ClothBodyContact, DynamicSphereTakesTheOppositeMomentum) {
   const double h = 0.005, r = 0.5, mass = 2.0, mu = 0.5;
   const SphereDistance shape(r);
-  const Mat3 inverse_inertia = Mat3::Identity() / (0.4 * mass * r * r);
+  const double inverse_moment = 1.0 / (0.4 * mass * r * r);
   for (double dt : {1e-3, 4e-3, 1e-2}) {
     const Vec3 start(0.01, r + h + 0.5 * dt, -0.005);
     const Vec3 v0(1.5, -2.0, 0.5);
-    Cloth cloth = one_free_vertex(start);
+    Cloth cloth = one_free_vertex(start, mu, h);
     cloth.velocities().row(0) = v0.transpose();
-    ClothBodyContact contact(cloth, mu, h);
-    PlainBodies bodies;
-    bodies.add(sphere(shape, r, Vec3::Zero(), 1.0 / mass), inverse_inertia);
-    bodies.bodies[0].friction = mu;  // mu = sqrt(mu mu)
+    ClothBodyContact contact(cloth);
+    ContactBodies bodies;
+    ContactBody ball = sphere(shape, r, Vec3::Zero(), 1.0 / mass);
+    ball.friction = mu;  // mu = sqrt(mu mu)
+    add(bodies, ball, inverse_moment);
     // what the contact should do, from the candidate (the sphere at rest)
     const Vec3 xc = start + dt * v0;
     const Vec3 normal = xc.normalized();
@@ -158,9 +134,13 @@ TEST(ClothBodyContact, DynamicSphereTakesTheOppositeMomentum) {
     EXPECT_LT((slip_after.normalized() - slip.normalized()).norm(), 1e-12) << dt;
     // momentum: the cloth's change plus the body's is zero
     const Vec3 cloth_change = m * (v - v0);
-    EXPECT_LT((cloth_change + mass * bodies.v[0]).norm(), 1e-15 * (1.0 + cloth_change.norm())) << dt;
-    EXPECT_GT(bodies.v[0].norm(), 0.0);
-    EXPECT_LT((bodies.l[0] + xc.cross(cloth_change)).norm(), 1e-15) << dt;
+    EXPECT_LT((cloth_change + mass * bodies.velocity(0)).norm(), 1e-15 * (1.0 + cloth_change.norm())) << dt;
+    EXPECT_GT(bodies.velocity(0).norm(), 0.0);
+    EXPECT_LT((bodies.angular_momentum(0) + xc.cross(cloth_change)).norm(), 1e-15) << dt;
+    // the record the world applies: the impulses the sphere took, which sum to its momentum
+    Vec3 taken = Vec3::Zero();
+    for (const BodyImpulse& impulse : bodies.impulses()) taken += impulse.impulse;
+    EXPECT_LT((taken - mass * bodies.velocity(0)).norm(), 1e-15 * (1.0 + taken.norm())) << dt;
   }
 }
 
@@ -170,17 +150,18 @@ TEST(ClothBodyContact, SleepingAndKinematicBodiesTakeNothing) {
   const double h = 0.005, r = 0.5, dt = 4e-3;
   const SphereDistance shape(r);
   for (bool kinematic : {false, true}) {
-    Cloth cloth = one_free_vertex(Vec3(0.0, r + h + dt, 0.0));
+    Cloth cloth = one_free_vertex(Vec3(0.0, r + h + dt, 0.0), 0.5, h);
     cloth.velocities().row(0) << 0.0, -2.0, 0.0;
-    ClothBodyContact contact(cloth, 0.5, h);
-    PlainBodies bodies;
-    bodies.add(sphere(shape, r, Vec3::Zero(), kinematic ? 0.0 : 0.5), Mat3::Identity());
-    bodies.asleep_[0] = !kinematic;
+    ClothBodyContact contact(cloth);
+    ContactBodies bodies;
+    add(bodies, sphere(shape, r, Vec3::Zero(), kinematic ? 0.0 : 0.5), kinematic ? 0.0 : 1.0, !kinematic);
     contact.collide(cloth, bodies, dt);
     EXPECT_NEAR(cloth.velocities()(0, 1), -1.0, 1e-11);
-    EXPECT_EQ(bodies.v[0].norm(), 0.0);
-    EXPECT_EQ(bodies.l[0].norm(), 0.0);
+    EXPECT_EQ(bodies.velocity(0).norm(), 0.0);
+    EXPECT_EQ(bodies.angular_momentum(0).norm(), 0.0);
     EXPECT_FALSE(bodies.asleep(0));
+    EXPECT_TRUE(bodies.impulses().empty());
+    EXPECT_EQ(bodies.woken().size(), kinematic ? 0u : 1u);  // the world wakes the island it names
   }
 }
 
@@ -205,16 +186,18 @@ TEST(ClothBodyContact, ABoxEdgeHoldsAClothEdgeCrossingIt) {
     desc.triangles.resize(1, 3);
     desc.triangles << 0, 1, 2;
     desc.pinned = {2};
+    desc.friction = 0.0;
+    desc.thickness = h;
     Cloth cloth(desc);
     cloth.velocities().row(0) = (-speed * out).transpose();
     cloth.velocities().row(1) = (-speed * out).transpose();
-    PlainBodies bodies;
+    ContactBodies bodies;
     ContactBody box;
     box.shape = &shape;
     box.bounding_radius = 0.35;
     box.kinematic = box.still = true;
-    bodies.add(box, Mat3::Zero());
-    ClothBodyContact contact(cloth, 0.0, h);
+    add(bodies, box, 0.0);
+    ClothBodyContact contact(cloth);
     contact.collide(cloth, bodies, dt);
     const Vec3 a = cloth.positions().row(0).transpose() + dt * cloth.velocities().row(0).transpose();
     const Vec3 b = cloth.positions().row(1).transpose() + dt * cloth.velocities().row(1).transpose();

@@ -222,7 +222,7 @@ TEST(SelfCollision, FoldedClothLandsOnItselfWithoutCrossing) {
       if (d.rest(k, 2) <= 0.5 && d.rest(k, 1) == 0.0) d.pinned.push_back(static_cast<int>(k));
     }
     d.material.stretch_stiffness = 2000.0;
-    world.add_cloth(d, 0.3, 0.005, on);
+    world.add_cloth(test::with_contacts(d, 0.3, 0.005, on));
     int worst = 0;
     for (int step = 0; step < 120; ++step) {
       world.step(1.0 / 240.0);
@@ -243,7 +243,7 @@ TEST(SelfCollision, ShakenClothNeverCrosses) {
   World world(WorldSettings{Vec3::Zero()});
   ClothDesc d = grid_cloth(17, 17, 1.0, 1.0);
   d.material.stretch_stiffness = 500.0;
-  world.add_cloth(d, 0.3, 0.01);
+  world.add_cloth(test::with_contacts(d, 0.3, 0.01));
   Cloth& cloth = world.cloth(0);
   for (Eigen::Index k = 0; k < cloth.velocities().rows(); ++k) {
     cloth.velocities().row(k) << speed(rng), speed(rng), speed(rng);
@@ -275,7 +275,7 @@ TEST(SelfCollision, SameBitsAtAnyThreadCount) {
     world.set_ground(GroundDef{0.0, 0.5, 0.0});
     ClothDesc d = folded_grid(33, 0.1);
     for (Eigen::Index k = 0; k < d.rest.rows(); ++k) d.rest(k, 1) += 0.3 + 0.05 * d.rest(k, 0);
-    world.add_cloth(d, 0.3, 0.005);
+    world.add_cloth(test::with_contacts(d, 0.3, 0.005));
     for (int frame = 0; frame < 24; ++frame) world.step_frame(1.0 / 24.0);
     EXPECT_GT(world.statistics().self_collision.repulsions, 0);
     results.push_back(world.cloth(0).positions());

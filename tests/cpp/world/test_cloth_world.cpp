@@ -27,7 +27,7 @@ TEST(ClothWorld, DrapeNeverPenetratesSphereOrGround) {
   BodyDesc ball = sphere_body(0.5, 1.0, Vec3(0.0, 0.5, 0.0));
   ball.kinematic = true;
   world.add_body(ball);
-  world.add_cloth(square_cloth(2.0, 24, Vec3(0.0, 1.2, 0.0)), 0.4, 0.005);
+  world.add_cloth(test::with_contacts(square_cloth(2.0, 24, Vec3(0.0, 1.2, 0.0)), 0.4, 0.005));
   double deepest = 0.0;
   for (int f = 0; f < 48; ++f) {
     world.step_frame(1.0 / 24.0);
@@ -53,7 +53,7 @@ TEST(ClothWorld, ClothOnTiltedGroundSlidesAndSticksPerCoulomb) {
     settings.gravity = Vec3(-g * std::sin(angle), -g * std::cos(angle), 0.0);
     World world(settings);
     world.set_ground(GroundDef{0.0, mu, 0.0});
-    world.add_cloth(square_cloth(0.5, 8, Vec3(0.0, 0.005, 0.0)), mu, 0.005);
+    world.add_cloth(test::with_contacts(square_cloth(0.5, 8, Vec3(0.0, 0.005, 0.0)), mu, 0.005));
     const double t = 1.0;
     for (int f = 0; f < 24; ++f) world.step_frame(1.0 / 24.0);
     const double moved = -world.cloth(0).positions().col(0).mean();
@@ -74,7 +74,7 @@ TEST(ClothWorld, PinnedClothHoldsADynamicBall) {
   hammock.pinned = {0, 20, 20 * 21, 20 * 21 + 20};
   hammock.material.stretch_stiffness = 1e5;  // a stiff sheet (N/m) ...
   hammock.material.damping = 0.05;           // ... well damped (s): the ball settles within the 3 s
-  world.add_cloth(hammock, 0.5, 0.005);
+  world.add_cloth(test::with_contacts(hammock, 0.5, 0.005));
   world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 1.3, 0.0)));
   // the ball lands at ~1.6 m/s; over the last half second its bounce has lost > 99% of
   // that kinetic energy (speed < 0.15 m/s)
@@ -99,7 +99,7 @@ TEST(ClothWorld, ClothAndBodyExchangeMomentumEqually) {
   settings.sleep_time = 0.0;
   World world(settings);
   ClothDesc sheet = square_cloth(1.0, 11, Vec3(0.0, 1.0, 0.0));
-  const int c = world.add_cloth(sheet, 0.0, 0.005);
+  const int c = world.add_cloth(test::with_contacts(sheet, 0.0, 0.005));
   world.cloth(c).velocities().col(1).setConstant(-2.0);
   world.add_body(sphere_body(0.2, 0.3, Vec3(0.0, 0.5, 0.0)));
   auto momentum = [&] {
@@ -127,7 +127,7 @@ TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
     BodyDesc ball = sphere_body(0.5, 1.0, Vec3(0.0, 0.5, 0.0));
     ball.kinematic = true;
     world.add_body(ball);
-    world.add_cloth(square_cloth(2.0, 9, Vec3(0.0, 1.2, 0.0)), 0.4, 0.005);
+    world.add_cloth(test::with_contacts(square_cloth(2.0, 9, Vec3(0.0, 1.2, 0.0)), 0.4, 0.005));
     EXPECT_EQ(world.automatic_cloth_steps(frame), 5);
     EXPECT_EQ(world.automatic_substeps(frame), 5);
     world.step_frame(frame);
@@ -137,7 +137,7 @@ TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
   {
     World world;
     world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 1.16, 0.0)));  // dynamic, 1 cm above the cloth
-    world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
+    world.add_cloth(test::with_contacts(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005));
     EXPECT_EQ(world.automatic_cloth_steps(frame), 10);
     EXPECT_EQ(world.automatic_substeps(frame), 10);
   }
@@ -146,7 +146,7 @@ TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
     settings.cloth_max_substep = 1.0 / 60.0;
     World world(settings);
     world.add_body(sphere_body(0.15, 0.5, Vec3(0.0, 30.0, 0.0)));  // dynamic, far away
-    world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
+    world.add_cloth(test::with_contacts(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005));
     EXPECT_EQ(world.automatic_cloth_steps(frame), 3);
     EXPECT_EQ(world.automatic_substeps(frame), 6);  // the bodies' 5, rounded up to a multiple of 3
   }
@@ -156,7 +156,7 @@ TEST(ClothWorld, StepsAtItsOwnRateUnlessADynamicBodyIsNear) {
     ball.kinematic = true;
     ball.linear_velocity = Vec3(0.0, 0.0, 30.0);
     world.add_body(ball);
-    world.add_cloth(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005);
+    world.add_cloth(test::with_contacts(square_cloth(1.0, 9, Vec3(0.0, 1.0, 0.0)), 0.4, 0.005));
     EXPECT_EQ(world.automatic_cloth_steps(frame), 21);
   }
 }
@@ -172,7 +172,7 @@ TEST(ClothWorld, EdgesRestOnAThinRodBetweenVertices) {
   ClothDesc d = test::grid_cloth(2, 2, 0.2, 0.6, Vec3(-0.1, 1.05, -0.3));
   d.material.bend_stiffness = 0.0;
   const double thickness = 0.005;
-  world.add_cloth(d, 0.5, thickness);
+  world.add_cloth(test::with_contacts(d, 0.5, thickness));
   for (int step = 0; step < 240; ++step) world.step(1.0 / 240.0);
   const Points& x = world.cloth(0).positions();
   const double middle = 0.25 * (x(0, 1) + x(1, 1) + x(2, 1) + x(3, 1));
@@ -202,7 +202,7 @@ TEST(ClothWorld, AKeyedBodyNearTheClothMovesAtMostHalfAnEdgeAStep) {
     const int b = world.add_body(box);
     world.set_kinematic_track(b, KinematicTrack({0.0, 1.0}, {Vec3(-1.0, 0.6 + away, 0.0), Vec3(11.0, 0.6 + away, 0.0)},
                                                 {Quat::Identity(), Quat::Identity()}));
-    world.add_cloth(square_cloth(1.0, 21, Vec3(0.0, 0.0, 0.0)), 0.4, 0.005);
+    world.add_cloth(test::with_contacts(square_cloth(1.0, 21, Vec3(0.0, 0.0, 0.0)), 0.4, 0.005));
     const int expected = away > 0.0 ? 5 : static_cast<int>(std::ceil(12.0 * frame / (0.5 * mean_edge)));
     EXPECT_EQ(expected, away > 0.0 ? 5 : 18);
     EXPECT_EQ(world.automatic_cloth_steps(frame), expected) << away;
@@ -216,7 +216,7 @@ TEST(ClothWorld, PinchedClothHoldsAHeavyBoxOffTheGround) {
   World world;
   world.set_ground(GroundDef{0.0, 0.5, 0.0});
   const double h = 0.005;
-  world.add_cloth(square_cloth(1.0, 21, Vec3(0.0, h, 0.0)), 0.4, h);
+  world.add_cloth(test::with_contacts(square_cloth(1.0, 21, Vec3(0.0, h, 0.0)), 0.4, h));
   world.add_body(box_body(Vec3::Constant(0.4), 20.0, Vec3(0.0, 0.2 + 3.0 * h, 0.0)));
   double deepest = 0.0;
   for (int f = 0; f < 24; ++f) {
@@ -263,7 +263,7 @@ TEST(ClothWorld, PinchedLayersHoldABoxAsHighAsTheyNeed) {
   }
   World world;
   world.set_ground(GroundDef{0.0, 0.5, 0.0});
-  world.add_cloth(d, 0.4, h);
+  world.add_cloth(test::with_contacts(d, 0.4, h));
   world.add_body(box_body(Vec3::Constant(0.4), 20.0, Vec3(0.0, 0.2 + 4.0 * h, 0.0)));
   double deepest = 0.0;
   long long crossings = 0;
@@ -300,7 +300,7 @@ TEST(ClothWorld, ABodyByThePinsDoesNotHurlTheCloth) {
     flap.triangles.resize(1, 3);
     flap.triangles << 0, 2, 1;
     flap.pinned = {0, 1};
-    world.add_cloth(flap, 0.5, 0.005, false);
+    world.add_cloth(test::with_contacts(flap, 0.5, 0.005, false));
     // a 0.2 m box turned corner-up (its (1, 1, 1) diagonal along +y), the corner 2.7 cm under
     // the flap at (0.6, z = from_pins), rising at 1 m/s
     const Quat turn = Quat::FromTwoVectors(Vec3(1.0, 1.0, 1.0).normalized(), Vec3::UnitY());
@@ -346,7 +346,7 @@ TEST(ClothWorld, ContactsHeldInTheSolveKeepTheDrapeFromStretching) {
     ClothDesc sheet = square_cloth(2.0, 17, Vec3(0.0, 1.01, 0.0));
     sheet.material.strain_limit = 0.0;
     sheet.integrator = integrator;
-    world.add_cloth(sheet, 0.0, 0.005, false);
+    world.add_cloth(test::with_contacts(sheet, 0.0, 0.005, false));
     double peak = 0.0;
     for (int f = 0; f < 11; ++f) {
       world.step_frame(1.0 / 24.0);
@@ -383,7 +383,7 @@ TEST(ClothWorld, AKeyedBoxPloughingASheetNeverPokesThroughIt) {
   const int box = world.add_body(plow);
   world.set_kinematic_track(box, KinematicTrack({0.0, 0.5, 2.5}, {Vec3(-0.9, 0.2, 0.0), Vec3(-0.9, 0.2, 0.0), Vec3(0.3, 0.2, 0.0)},
                                                 {turn, turn, turn}));
-  world.add_cloth(square_cloth(1.0, 20, Vec3(0.0, 0.02, 0.0)), 0.5, 0.005);
+  world.add_cloth(test::with_contacts(square_cloth(1.0, 20, Vec3(0.0, 0.02, 0.0)), 0.5, 0.005));
   const TriangleMesh corners = make_box_mesh(size, 1);
   const auto& edges = unique_edges(corners.triangles);
   const Triangles& triangles = world.cloth(0).triangles();

@@ -127,7 +127,7 @@ TEST(Quality, ClothEdgeThroughASphereBetweenVerticesOutside) {
   d.rest << -1, 0.4, 0, 1, 0.4, 0, 0, 0.4, 2;
   d.triangles.resize(1, 3);
   d.triangles << 0, 1, 2;
-  world.add_cloth(d, 0.3, 0.005);
+  world.add_cloth(test::with_contacts(d, 0.3, 0.005));
   const ClothQuality q = cloth_quality(world, 0);
   EXPECT_EQ(q.vertex_penetration.depth, 0.0);
   EXPECT_EQ(q.vertex_penetration.a, -1);

@@ -258,7 +258,7 @@ TEST(ClothMembrane, UniformStretchGivesStVKStress) {
 
 // Springs stand for the same sheet at any resolution: a grid stretched uniformly along x by
 // a small strain e (its width held) stores 1/2 Y e^2 per unit area (the calibration in
-// cloth.cpp), whatever its spacing, to O(e) (the springs' strain is |A| - 1, not Green's);
+// cloth_forces.cpp), whatever its spacing, to O(e) (the springs' strain is |A| - 1, not Green's);
 // tolerance 1% at e = 1e-3. And a grid's bending energy on a cylinder is resolution-free
 // (next test), so both halves of a spring cloth are.
 TEST(ClothSprings, StiffnessIsTheSheetsAtAnyResolution) {
@@ -386,7 +386,7 @@ TEST(ClothBending, CurvedRestMeshKeepsItsShape) {
 // the rungs) nothing, to first order in the strain: each side edge's strain is (weight of its
 // column below) / E, and the total stretch is the sum over edges of that strain times h.
 // A side edge has one triangle (area width h / 2), so for a sheet of stiffness Y its spring
-// has E = 12/5 Y (width h / 6) / h = 0.4 Y width (cloth.cpp): Y = 25 E here.
+// has E = 12/5 Y (width h / 6) / h = 0.4 Y width (cloth_forces.cpp): Y = 25 E here.
 // The two columns carry slightly different weights (the triangulation lumps one more third
 // of a triangle on one side), so the strip leans a little and the diagonals pick up load:
 // a relative error of order the strain itself (measured: -0.57 x the top strain, halving

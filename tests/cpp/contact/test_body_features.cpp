@@ -98,7 +98,7 @@ bool segment_crosses(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b,
 TEST(BodyFeatures, BoxCornerNeverPokesThroughATautSheet) {
   World world;
   const int n = 21;
-  world.add_cloth(bordered_sheet(n), 0.3, 0.005, false);
+  world.add_cloth(test::with_contacts(bordered_sheet(n), 0.3, 0.005, false));
   // the rotation taking the corner (-1, -1, -1) / sqrt(3) to -y
   const Vec3 corner_dir = -Vec3::Ones().normalized();
   const Quat turn = Quat::FromTwoVectors(corner_dir, -Vec3::UnitY());
@@ -224,7 +224,7 @@ struct SheetRun {
 SheetRun drive_into_sheet(const BodyDesc& body, const TriangleMesh& mesh) {
   World world;
   const int n = 21;
-  world.add_cloth(bordered_sheet(n), 0.3, 0.005, false);
+  world.add_cloth(test::with_contacts(bordered_sheet(n), 0.3, 0.005, false));
   world.add_body(body);
   SheetRun run;
   const auto edges = unique_edges(mesh.triangles);

@@ -1,0 +1,227 @@
+// One cloth's step, after the rigid bodies have moved (DESIGN.md, "The world step", stage 6).
+//
+// The cloth computes its internal forces and new velocities itself (integrators.h), with the
+// contacts resting on still surfaces held inside its implicit solve; its contacts with the
+// bodies and the ground (contact/cloth_body_contact.h: the candidates x + dt v pushed out to
+// the cloth's thickness, Coulomb friction, the opposite momentum to dynamic bodies) then
+// alternate with strain limiting (strain_limiting.h) and self-collision (self_collision.h),
+// then self-collision and strain limiting go in rounds (self-collision with the kinematic
+// boxes and meshes as obstacles of infinite mass: contact/cloth_obstacles.h), then a cloth
+// pinched between two surfaces holds them apart, then positions. Each of these moves only the
+// velocities v, so that the candidates x + dt v respect them all; the last word is
+// self-collision's, so that no layer passes through another.
+#include "cloth/cloth_step.h"
+
+namespace simbake {
+
+namespace {
+
+constexpr int kStrainCollisionPasses = 12; // limiter-then-collisions passes per step (at most)
+constexpr double kStrainSlack = 0.02;      // a pass is enough once no edge is past the limit by 2% of it
+constexpr double kFinalSlack = 0.002;      // the end-of-step rounds: done once no edge is past the limit by 0.2% of it
+                                           // (within the QA's and the render-ready test's 1%)
+constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
+constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
+constexpr int kZoneRounds = 3;             // impact zones, then strain limiting around them, in turn (at most)
+
+// The sub-stages of one cloth's step, each timed into its own profile entry
+class ClothStep {
+ public:
+  ClothStep(SteppedCloth& stepped, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
+            StageProfile& profile, SelfCollisionStatistics& stats)
+      : cloth_(stepped.cloth), contact_(stepped.contact), self_(stepped.self), obstacles_(stepped.obstacles),
+        bodies_(bodies), dt_(dt), settings_(settings), profile_(profile), stats_(stats),
+        limit_(stepped.cloth.material().strain_limit) {
+    self_settings_.thickness = contact_.thickness();
+    self_settings_.friction = contact_.friction();
+    self_settings_.support = &contact_.support();
+    // the kinematic boxes and meshes join self-collision as obstacles (contact/cloth_obstacles.h):
+    // its calls then see the cloth's vertices and the obstacles' in one set of arrays
+    if (self_ && obstacles_.select(bodies_)) self_.emplace(cloth_.triangles(), cloth_.vertex_count(), obstacles_.meshes());
+    joined_ = self_ && !obstacles_.empty();
+    if (joined_) {
+      obstacles_.begin_step(cloth_, bodies_, contact_.inverse_mass(), dt_);
+      self_settings_.obstacle_motion = &obstacles_.motions();
+    }
+  }
+
+  bool self_collision() const { return self_.has_value(); }
+
+  // internal forces and the velocity update, holding the contacts resting on still surfaces;
+  // the contacts the solve holds, and their friction after it, are contacts' time
+  void update_velocities() {
+    std::vector<ClothContactConstraint> constraints;
+    {
+      StageTimer timer(profile_, Stage::kClothContacts);
+      if (settings_.contacts_in_solve) {
+        contact_.contact_constraints(cloth_, bodies_, constraints);
+      } else {
+        contact_.forget_touches();
+      }
+    }
+    {
+      StageTimer timer(profile_, Stage::kClothForces);
+      cloth_.update_velocities(dt_, settings_.gravity, &constraints);
+    }
+    {
+      StageTimer timer(profile_, Stage::kClothContacts);
+      contact_.apply_constraint_impulses(cloth_, bodies_, constraints);
+    }
+  }
+
+  void collide_with_bodies() {
+    StageTimer timer(profile_, Stage::kClothContacts);
+    contact_.collide(cloth_, bodies_, dt_);
+  }
+
+  void limit_strain(bool global) {
+    StageTimer timer(profile_, Stage::kClothStrain);
+    cloth_.limit_strain(dt_, global);
+  }
+
+  // self-collision's repulsions between layers closer than the thickness
+  void repel() {
+    on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+      self_->repel(x, v, w, dt_, settings, stats_);
+      return true;
+    });
+  }
+
+  // `passes` passes of self-collision's continuous collisions; true when none is left
+  bool collide_self(int passes) {
+    return on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+      return self_->collide(x, v, w, dt_, settings, stats_, passes);
+    });
+  }
+
+  // Strain limiting, collisions with bodies and with itself in turn, until they agree: each
+  // can undo a little of what the others did (a collision stretches an edge the limiter
+  // fixed; an impulse against a layer pushes a vertex towards a body). Self-collision takes
+  // part in the first few passes only (it costs most); what it leaves is small
+  void strain_and_collision_passes() {
+    for (int pass = 0; pass < kStrainCollisionPasses; ++pass) {
+      limit_strain(pass == 0);
+      collide_with_bodies();
+      bool clear = true;
+      if (self_ && pass < kSelfCollisionPasses) {
+        // layers the body contacts pressed into one plane (each at the thickness from the
+        // surface) are pushed apart again, the outer one outwards
+        repel();
+        clear = collide_self(1);
+      }
+      if (clear && (limit_ <= 0.0 || cloth_.candidate_strain(dt_) <= limit_ * (1.0 + kStrainSlack))) break;
+    }
+  }
+
+  // The cloth against itself has the last word: repulsions (the last body contacts may have
+  // pressed layers into one plane) and collision impulses; then strain limiting (all edges
+  // at once, converged) and collisions in turn, until the collisions find nothing ahead and
+  // leave no edge past the limit (their impulses alone can stretch edges well past it after
+  // a converged limiter). Body contacts take no part in these rounds: they would pull the
+  // layers against a body apart again, and the strain with them. True when the cloth is clear
+  bool self_collision_rounds() {
+    repel();
+    collide_self(1);
+    bool clear = false;
+    for (int round = 0; round < kFinalRounds; ++round) {
+      limit_strain(true);
+      clear = collide_self(2);
+      if (clear && !over_limit()) break;
+    }
+    return clear;
+  }
+
+  // Rigid impact zones for what is left, so that nothing passes a layer through another.
+  // Impact zones move their vertices rigidly, which stretches the edges from a zone to the
+  // cloth around it: those edges are limited again with the zones held still (only the
+  // vertices around them move), and what that brings into collision joins a zone in turn; the
+  // zones have the last word. A round that finds the cloth clear but an edge past the limit
+  // limits it again, then collides: a zone's rigid velocity stretches its own edges too
+  // (x + dt (v + w x r) is no rotation), and so may the rounds before (when they ran out)
+  void impact_zone_rounds(bool clear) {
+    for (int round = 0; round < kZoneRounds; ++round) {
+      if (clear) {
+        if (!over_limit() || round + 1 == kZoneRounds) break;
+        limit_strain(true);
+        clear = collide_self(2);
+        if (clear) continue;
+      }
+      on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+        self_->impact_zones(x, v, w, dt_, settings, stats_);
+        return true;
+      });
+      if (!over_limit()) break;
+      if (round + 1 == kZoneRounds) break;
+      push_zones();
+      clear = collide_self(1);
+    }
+  }
+
+  void hold_pinched_bodies() {
+    StageTimer timer(profile_, Stage::kClothContacts);
+    contact_.hold_pinched_bodies(cloth_, bodies_, dt_);
+  }
+
+  void update_positions() { cloth_.update_positions(dt_); }
+
+ private:
+  bool over_limit() const { return limit_ > 0.0 && cloth_.candidate_strain(dt_) > limit_ * (1.0 + kFinalSlack); }
+
+  // the edges around the zones limited with the zones held still, and the zones taking the
+  // pushes of those edges as rigid bodies, so that momentum is kept (held still, they would
+  // absorb them)
+  void push_zones() {
+    Points pushed;
+    {
+      StageTimer timer(profile_, Stage::kClothStrain);
+      const std::vector<char>& zones = self_->zone_vertices();
+      pushed = cloth_.limit_strain_holding(dt_, joined_ ? obstacles_.cloth_part(zones) : zones);
+    }
+    on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
+      self_->push_zones(x, v, w, settings, joined_ ? obstacles_.padded(pushed) : pushed);
+      return true;
+    });
+  }
+
+  // f(x, v, inverse mass, settings) on the cloth's arrays, or on those joined with the obstacles'
+  template <class F>
+  bool on_self(F&& f) {
+    StageTimer timer(profile_, Stage::kClothSelfCollision);
+    if (!joined_) return f(cloth_.positions(), cloth_.velocities(), contact_.inverse_mass(), self_settings_);
+    obstacles_.load(cloth_.velocities(), contact_.support());
+    SelfCollisionSettings settings = self_settings_;
+    settings.support = &obstacles_.support();
+    const bool result = f(obstacles_.positions(), obstacles_.velocities(), obstacles_.inverse_mass(), settings);
+    obstacles_.store(cloth_.velocities());
+    return result;
+  }
+
+  Cloth& cloth_;
+  ClothBodyContact& contact_;
+  std::optional<SelfCollision>& self_;
+  ClothObstacles& obstacles_;
+  ContactBodies& bodies_;
+  const double dt_;
+  const ClothStepSettings& settings_;
+  StageProfile& profile_;
+  SelfCollisionStatistics& stats_;
+  const double limit_;                   // the cloth's strain limit (0: none)
+  SelfCollisionSettings self_settings_;
+  bool joined_ = false;                  // the obstacles joined self-collision this step
+};
+
+}  // namespace
+
+void step_cloth(SteppedCloth& cloth, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
+                StageProfile& profile, SelfCollisionStatistics& stats) {
+  ClothStep step(cloth, bodies, dt, settings, profile, stats);
+  step.update_velocities();
+  step.collide_with_bodies();
+  if (step.self_collision()) step.repel();
+  step.strain_and_collision_passes();
+  if (step.self_collision()) step.impact_zone_rounds(step.self_collision_rounds());
+  step.hold_pinched_bodies();
+  step.update_positions();
+}
+
+}  // namespace simbake

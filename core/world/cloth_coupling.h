@@ -1,0 +1,24 @@
+// Bodies and cloths meet here: the bodies described to a cloth's contacts
+// (contact/contact_bodies.h) when its step begins, and what those contacts did to the bodies
+// (impulses, woken islands, the pinches' displacements) applied to the bodies' state after
+// it, in the order the contacts did it.
+#pragma once
+
+#include "contact/contact_bodies.h"
+#include "rigid/rigid_data.h"
+
+#include <vector>
+
+namespace simbake {
+
+// Each body's mesh pose now: where the cloths' step starts from (ContactBody::start_pose)
+void record_start_poses(const RigidModel& model, const RigidData& data, std::vector<Pose>& start_poses);
+
+// The bodies and the ground as a cloth's contacts see them now
+void describe_bodies(const RigidModel& model, const RigidData& data, const std::vector<Pose>& start_poses,
+                     ContactBodies& out);
+
+// What the contacts recorded in `bodies`, applied to the bodies' state
+void apply_contact_results(const ContactBodies& bodies, const RigidModel& model, RigidData& data);
+
+}  // namespace simbake

@@ -1,0 +1,24 @@
+// The automatic substep rule: how many substeps the next frame takes, and how many of them
+// the cloths step at (the derivation is in schedule.cpp).
+#pragma once
+
+#include "cloth/cloth_step.h"
+#include "rigid/rigid_data.h"
+#include "world/world_settings.h"
+
+#include <vector>
+
+namespace simbake {
+
+// The substeps of a frame and the cloth steps among them (the cloths step once every
+// substeps / cloth_steps substeps, over that many substeps' time)
+struct FrameSchedule {
+  int substeps = 1;
+  int cloth_steps = 1;  // 1 with no cloth
+};
+
+// The automatic schedule of the frame of length frame_dt (s) that starts at `time` (s)
+FrameSchedule frame_schedule(const RigidModel& model, const RigidData& data, const std::vector<SteppedCloth>& cloths,
+                             const WorldSettings& settings, double time, double frame_dt);
+
+}  // namespace simbake
