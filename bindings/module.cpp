@@ -435,7 +435,8 @@ void bind_world_building(py::class_<World>& world) {
              return World(given_or_from_keywords(settings, kwargs, "settings"));
            }),
            py::arg("settings") = py::none(), "World(settings) or World(**WorldSettings fields)")
-      .def_property_readonly("settings", &World::settings)
+      .def_property_readonly("settings", [](const World& w) { return WorldSettings(w.settings()); },
+                             "a copy of the world's settings")
       .def("set_ground", [](World& w, const std::optional<GroundDef>& ground, const py::kwargs& kwargs) {
              w.set_ground(given_or_from_keywords(ground, kwargs, "ground"));
            }, py::arg("ground") = py::none(), "set_ground(GroundDef) or set_ground(**GroundDef fields)")

@@ -4,13 +4,15 @@
 
 namespace simbake {
 
-void record_start_poses(const RigidModel& model, const RigidData& data, std::vector<Pose>& start_poses) {
+void record_start_poses(const RigidModel& model, const RigidData& data, ClothCoupling& coupling) {
+  std::vector<Pose>& start_poses = coupling.start_poses;
   start_poses.resize(model.body_count());
   for (int b = 0; b < model.body_count(); ++b) start_poses[b] = body_mesh_pose(model, data, b);
 }
 
-void describe_bodies(const RigidModel& model, const RigidData& data, const std::vector<Pose>& start_poses,
-                     ContactBodies& out) {
+void describe_bodies(const RigidModel& model, const RigidData& data, ClothCoupling& coupling) {
+  const std::vector<Pose>& start_poses = coupling.start_poses;
+  ContactBodies& out = coupling.bodies;
   out.clear();
   for (int b = 0; b < model.body_count(); ++b) {
     const RigidBodyDef& def = model.defs[b];

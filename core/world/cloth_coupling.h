@@ -11,12 +11,17 @@
 
 namespace simbake {
 
-// Each body's mesh pose now: where the cloths' step starts from (ContactBody::start_pose)
-void record_start_poses(const RigidModel& model, const RigidData& data, std::vector<Pose>& start_poses);
+// What the coupling keeps over the cloths' step
+struct ClothCoupling {
+  std::vector<Pose> start_poses;  // (nbody) each body's mesh pose when the cloths' step began
+  ContactBodies bodies;           // the bodies as the cloth being stepped sees them (scratch)
+};
 
-// The bodies and the ground as a cloth's contacts see them now
-void describe_bodies(const RigidModel& model, const RigidData& data, const std::vector<Pose>& start_poses,
-                     ContactBodies& out);
+// Each body's mesh pose now: where the cloths' step starts from (ContactBody::start_pose)
+void record_start_poses(const RigidModel& model, const RigidData& data, ClothCoupling& coupling);
+
+// The bodies and the ground as a cloth's contacts see them now, into coupling.bodies
+void describe_bodies(const RigidModel& model, const RigidData& data, ClothCoupling& coupling);
 
 // What the contacts recorded in `bodies`, applied to the bodies' state
 void apply_contact_results(const ContactBodies& bodies, const RigidModel& model, RigidData& data);

@@ -130,7 +130,7 @@ void World::step_bodies(double dt) {
 
 void World::begin_cloth_step() {
   if (cloths_.empty()) return;
-  record_start_poses(rigid_model_, rigid_data_, cloth_start_poses_);
+  record_start_poses(rigid_model_, rigid_data_, coupling_);
 }
 
 void World::step_cloths(double dt) {
@@ -139,9 +139,9 @@ void World::step_cloths(double dt) {
   for (SteppedCloth& cloth : cloths_) {
     // the bodies as the contacts see them, posed as they are now (only the pinches at the
     // end of this cloth's step move them); what the contacts did to them, applied after
-    describe_bodies(rigid_model_, rigid_data_, cloth_start_poses_, contact_bodies_);
-    step_cloth(cloth, contact_bodies_, dt, cloth_settings, profile_, stats_.self_collision);
-    apply_contact_results(contact_bodies_, rigid_model_, rigid_data_);
+    describe_bodies(rigid_model_, rigid_data_, coupling_);
+    step_cloth(cloth, coupling_.bodies, dt, cloth_settings, profile_, stats_.self_collision);
+    apply_contact_results(coupling_.bodies, rigid_model_, rigid_data_);
   }
 }
 

@@ -11,6 +11,7 @@
 
 #include "cloth/cloth_step.h"
 #include "contact/cloth_body_contact.h"
+#include "world/cloth_coupling.h"
 #include "rigid/rigid_scratch.h"
 #include "world/stages.h"
 #include "world/statistics.h"
@@ -79,8 +80,7 @@ class World {
   RigidData rigid_data_;                    // their state
   RigidScratch rigid_scratch_;              // the rigid stages' per-step scratch
   std::vector<SteppedCloth> cloths_;        // (ncloth) cloths, their state, contacts, self-collision
-  std::vector<Pose> cloth_start_poses_;     // (nbody) each body's mesh pose at the start of the cloths' step
-  ContactBodies contact_bodies_;            // scratch: the bodies as a cloth's contacts see them
+  ClothCoupling coupling_;                  // the bodies as the cloths' contacts see them
   double time_ = 0.0;                       // simulated time at the start of the step (s)
   StepStatistics stats_;
   StageProfile profile_;

@@ -178,6 +178,9 @@ def test_settings_and_descriptions_take_their_fields_by_keyword():
         _core.World(_core.WorldSettings(), threads=1)  # settings or its fields, not both
     with pytest.raises(TypeError):
         _core.GroundDef(0.0)
-    assert _core.World(gravity=np.zeros(3), sleep_time=0.0).settings.sleep_time == 0.0
+    world = _core.World(gravity=np.zeros(3), sleep_time=0.0)
+    assert world.settings.sleep_time == 0.0
+    world.settings.threads = 100000  # a copy: the world's own settings stay checked
+    assert world.settings.threads == 0
     with pytest.raises(ValueError, match="unknown choice 'mesh'"):
         _core.ClothDesc(model="mesh")
