@@ -1,0 +1,116 @@
+"""Running many bakes at once on Dask distributed: a local cluster by default, or a farm's.
+
+Each bake is one Dask task; a worker runs one task at a time (one Dask thread per worker
+process) and the bake uses its own solver thread count. Without a scheduler address a
+``LocalCluster`` of worker processes is started on this machine (and closed at the end);
+with ``tcp://HOST:PORT`` the tasks go to that scheduler, whose workers were started with
+``dask worker`` (or by dask-jobqueue) and see the same files at the same paths.
+
+A worker that dies during a task (killed, out of memory, its machine lost) makes the
+scheduler run the task again elsewhere, at most ``retries`` more times (the scheduler's
+``distributed.scheduler.allowed-failures``: set here for a local cluster; a farm's scheduler
+has its own, 3 by default); past that the task ends with Dask's KilledWorker, reported as
+that bake's failure. A task raising an exception is not run again (a bake is deterministic:
+it would fail the same way); bake functions report their expected failures as results.
+
+Dask is imported here only, and only when a wedge or batch runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import uuid
+from typing import Any, Callable, Iterator, Sequence
+
+from .errors import SceneError
+
+DEFAULT_RETRIES = 2                 # runs of a task after its worker died, beyond the first
+CONNECT_TIMEOUT = "20s"             # to reach a farm's scheduler
+INSTALL_HINT = "install the wedge extra: pip install 'simbake[wedge]' (make install does)"
+
+
+def _distributed():
+    try:
+        import dask
+        import distributed
+    except ImportError:
+        raise SceneError("dask", "", f"simbake wedge and batch run on Dask distributed; {INSTALL_HINT}") from None
+    return dask, distributed
+
+
+def default_workers() -> int:
+    """Worker processes of a local cluster: one per CPU this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None,
+                retries: int = DEFAULT_RETRIES) -> Iterator[Any]:
+    """A Dask client: to the farm's `scheduler`, or to a new local cluster of `workers`
+    processes (closed when the block ends, even on an error)."""
+    dask, distributed = _distributed()
+    if scheduler is not None:
+        if workers is not None:
+            raise SceneError(scheduler, "--workers", "sets a local cluster's size; a farm's workers are "
+                                                     "started with `dask worker` (leave --workers out)")
+        try:
+            client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
+        except (OSError, TimeoutError, ValueError) as error:
+            raise SceneError(scheduler, "--scheduler", f"cannot connect to the Dask scheduler: {error}") from None
+        with contextlib.closing(client):
+            yield client
+        return
+    workers = default_workers() if workers is None else workers
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 1024:
+        raise SceneError("--workers", "", f"must be a whole number in [1, 1024], got {workers!r}")
+    with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=":0", silence_logs=logging.ERROR)
+    try:
+        with distributed.Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+def describe_client(client) -> str:
+    """'2 workers (2 threads), dashboard http://...': what the bakes run on."""
+    info = client.scheduler_info()
+    workers = info.get("workers", {})
+    threads = sum(w.get("nthreads", 0) for w in workers.values())
+    link = client.dashboard_link if info.get("services", {}).get("dashboard") else "none (install bokeh)"
+    return f"{len(workers)} Dask worker(s) ({threads} thread(s)) at {client.scheduler.address}; dashboard {link}"
+
+
+def _failure(future, error: BaseException) -> str:
+    """A task's exception as a one-line error."""
+    if type(error).__name__ == "KilledWorker":
+        return (f"its worker died {getattr(error, 'allowed_failures', 0) + 1} time(s) baking it "
+                "(killed or out of memory); not tried again")
+    first = (str(error).strip().splitlines() or [""])[0]
+    return f"internal error: {type(error).__name__}: {first}"
+
+
+def run_tasks(client, function: Callable, tasks: Sequence[tuple[str, tuple]],
+              on_result: Callable[[str, Any, str | None], None]) -> None:
+    """Submit `function(*args)` for each (name, args) and call on_result(name, result, error)
+    as each ends, in the order they end: `error` is a one-line description when the task
+    raised or its workers kept dying, else None."""
+    _, distributed = _distributed()
+    token = uuid.uuid4().hex[:8]
+    futures = {client.submit(function, *args, key=f"simbake-{name}-{token}", pure=False, retries=0): name
+               for name, args in tasks}
+    try:
+        for future in distributed.as_completed(list(futures)):
+            name = futures[future]
+            if future.status == "finished":
+                on_result(name, future.result(), None)
+            else:
+                on_result(name, None, _failure(future, future.exception()))
+    finally:
+        client.cancel(list(futures))  # an interrupted run leaves nothing queued on a farm
