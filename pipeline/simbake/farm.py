@@ -69,8 +69,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 1024:
         raise SceneError("--workers", "", f"must be a whole number in [1, 1024], got {workers!r}")
     with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+        # the workers' own log lines stay out of the terminal (a bake's failure comes back as
+        # its result; on a busy machine a worker closing logs its last missed heartbeat)
         cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                           dashboard_address=":0", silence_logs=logging.ERROR)
+                                           dashboard_address=":0", silence_logs=logging.CRITICAL)
     try:
         with distributed.Client(cluster) as client:
             yield client

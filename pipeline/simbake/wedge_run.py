@@ -199,7 +199,7 @@ class Staging:
 
     def publish(self, manifest: dict) -> None:
         """The manifest written, then the folder renamed into place (an earlier one replaced)."""
-        (self.path / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+        (self.path / MANIFEST).write_text(json.dumps(manifest, indent=1, default=str) + "\n")
         old = None
         if os.path.lexists(self.final):
             old = self.final.with_name(f".{self.final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")

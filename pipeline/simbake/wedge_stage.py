@@ -32,7 +32,7 @@ from typing import Any, Sequence
 
 from .errors import SceneError
 from .files import write_atomically
-from .wedge_takes import TakeResult
+from .wedge_takes import TakeResult, format_value
 
 VARIANT_SET = "wedge"
 _METADATA = ("upAxis", "metersPerUnit", "kilogramsPerUnit", "timeCodesPerSecond", "framesPerSecond")
@@ -68,18 +68,29 @@ def _metadata(layer, stages: Sequence[Path]) -> str:
     return first.defaultPrim or "World"
 
 
+def _usd_value(value: Any) -> Any:
+    """A setting as a USD dictionary holds it; what it cannot (a TOML date) as its text."""
+    from .usd_writer import _to_usd
+
+    try:
+        return _to_usd(value, "settings")
+    except TypeError:
+        return format_value(value)
+
+
 def _take_data(record: TakeResult, folder: Path) -> dict:
     from .usd_writer import _to_usd
 
-    data = {"take": record.name, "label": record.label, "seed": record.seed, "settings": record.settings,
-            **record.figures}
+    data = {"take": record.name, "label": record.label, "seed": record.seed, **record.figures}
     if record.stage is not None:
         data["stage"] = _relative(record.stage, folder)
     if record.qa is not None:
         data["qa"] = _relative(record.qa, folder)
     if record.error is not None:
         data["error"] = record.error
-    return _to_usd(data, "customData")
+    data = _to_usd(data, "customData")
+    data["settings"] = {key: _usd_value(value) for key, value in record.settings.items()}
+    return data
 
 
 def write_wedge_stage(out: Path, scene: str, keys: Sequence[str], seeds: int,
