@@ -27,6 +27,8 @@ from typing import Any, Callable, Iterator, Sequence
 from .errors import SceneError
 
 DEFAULT_RETRIES = 2                 # runs of a task after its worker died, beyond the first
+MAX_RETRIES = 100
+MAX_WORKERS = 1024                  # processes of a local cluster
 CONNECT_TIMEOUT = "20s"             # to reach a farm's scheduler
 INSTALL_HINT = "install the wedge extra: pip install 'simbake[wedge]' (make install does)"
 
@@ -38,6 +40,18 @@ def _distributed():
     except ImportError:
         raise SceneError("dask", "", f"simbake wedge and batch run on Dask distributed; {INSTALL_HINT}") from None
     return dask, distributed
+
+
+def check_options(file: str, workers: int | None, retries: int, scheduler: str | None = None) -> None:
+    """--workers (None: one per CPU; a local cluster's alone) and --retries, before anything starts."""
+    if scheduler is not None and workers is not None:
+        raise SceneError(file, "--workers", "sets a local cluster's size; a farm's workers are started with "
+                                            "`dask worker` (leave --workers out with --scheduler)")
+    for key, value, lo, hi in (("--workers", workers, 1, MAX_WORKERS), ("--retries", retries, 0, MAX_RETRIES)):
+        if value is None and key == "--workers":
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise SceneError(file, key, f"must be a whole number in [{lo}, {hi}], got {value!r}")
 
 
 def default_workers() -> int:
@@ -55,9 +69,6 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
     processes (closed when the block ends, even on an error)."""
     dask, distributed = _distributed()
     if scheduler is not None:
-        if workers is not None:
-            raise SceneError(scheduler, "--workers", "sets a local cluster's size; a farm's workers are "
-                                                     "started with `dask worker` (leave --workers out)")
         try:
             client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError, ValueError) as error:
@@ -66,8 +77,6 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
             yield client
         return
     workers = default_workers() if workers is None else workers
-    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 1024:
-        raise SceneError("--workers", "", f"must be a whole number in [1, 1024], got {workers!r}")
     with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
         # the workers' own log lines stay out of the terminal (a bake's failure comes back as
         # its result; on a busy machine a worker closing logs its last missed heartbeat)

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from .errors import OutputError, SceneError, SimulationError
-from .farm import DEFAULT_RETRIES, dask_client, run_tasks
+from .farm import DEFAULT_RETRIES, check_options, dask_client, run_tasks
 from .files import _TEMP, _alive, check_output_path
 from .wedge_takes import Take, TakeResult, check_keys, is_shot, perturbable, plan_takes, take_scene
 
@@ -255,8 +255,8 @@ def default_output(scene_file: str) -> Path:
     return Path(f"{Path(scene_file).stem}.wedge.usda")
 
 
-def plan_wedge(scene, variations: Mapping[str, Sequence[Any]], output=None, seeds: int = 1,
-               threads: int = 1) -> WedgePlan:
+def plan_wedge(scene, variations: Mapping[str, Sequence[Any]], output=None, seeds: int = 1, threads: int = 1,
+               workers: int | None = None, retries: int = DEFAULT_RETRIES, scheduler: str | None = None) -> WedgePlan:
     """Every check a wedge makes before baking (SceneError, exit 2): the scene, the keys, the
     takes, the outputs."""
     from .scene import load_scene
@@ -266,6 +266,7 @@ def plan_wedge(scene, variations: Mapping[str, Sequence[Any]], output=None, seed
     if seeds != 1 and not perturbable(base):
         raise SceneError(scene_file, "--seeds", "the scene has no dynamic body or cloth for a seed to move")
     _check_threads(threads, scene_file)
+    check_options(scene_file, workers, retries, scheduler)
     types = check_keys(scene_file, list(variations))
     takes = plan_takes(variations, seeds, scene_file)
     output = Path(output) if output is not None else default_output(scene_file)
@@ -284,7 +285,7 @@ def wedge(scene, variations: Mapping[str, Sequence[Any]], client=None, *, output
     the takes' results in order (`.stats`, the BakeStats, or `.error`). `client`: a Dask
     client to use (else a local cluster of `workers` processes, or the `scheduler`'s).
     `threads`: each bake's solver threads."""
-    plan = plan_wedge(scene, variations, output, seeds, threads)
+    plan = plan_wedge(scene, variations, output, seeds, threads, workers, retries, scheduler)
     blank = {t.name: TakeResult(name=t.name, label=t.label(), seed=t.seed, settings=dict(t.settings))
              for t in plan.takes}
     staging = Staging(plan.takes_dir)
@@ -350,6 +351,7 @@ def batch(scenes: Sequence, client=None, *, output_dir=None, threads: int = 1, w
     scene_files = [_scene_file(s) for s in scenes]
     folder = Path(output_dir) if output_dir is not None else Path(".")
     _check_threads(threads, "batch")
+    check_options("batch", workers, retries, scheduler)
     outputs = _check_batch(scene_files, folder)
     names = [f"{i:03d}-{Path(s).stem}" for i, s in enumerate(scene_files)]
     blank = {n: TakeResult(name=Path(s).name, label=s) for n, s in zip(names, scene_files)}

@@ -383,6 +383,8 @@ def test_wedge_command_with_a_failed_take_exits_1_and_writes_the_others(tmp_path
     (["--set", "bodies.ball.mass=1", "--set", "bodies.ball.mass=2"], "--set bodies.ball.mass: given twice"),
     (["--set", "cloths.sheet.damping=1"], "--set cloths.sheet.damping: no cloth named 'sheet' (cloths: none)"),
     (["--set", "bodies.ball.mass=1", "--threads", "-1"], "--threads: must be a whole number in [0, 1024]"),
+    (["--set", "bodies.ball.mass=1", "--workers", "0"], "--workers: must be a whole number in [1, 1024], got 0"),
+    (["--set", "bodies.ball.mass=1", "--retries", "-1"], "--retries: must be a whole number in [0, 100], got -1"),
     (["--set", "bodies.ball.mass=1", "--scheduler", "tcp://127.0.0.1:9", "--workers", "2"],
      "--workers: sets a local cluster's size"),
 ])
