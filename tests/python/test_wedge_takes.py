@@ -130,3 +130,20 @@ def test_a_shots_take_loads_its_override_layer(tmp_path):
     wrong = Take("take_02", (("/World/Props/Crate.physics:mass", "heavy"),), 0)
     with pytest.raises(SceneError, match=r"/World/Props/Crate.physics:mass: cannot be set to heavy \(a float\)"):
         take_scene(str(shot), wrong, folder, types)
+
+
+def test_seeds_need_something_to_move(write_scene, tmp_path):
+    from simbake.wedge_run import plan_wedge
+
+    still = write_scene("""
+        [scene]
+        end_frame = 3
+        [[bodies]]
+        name = "post"
+        shape = { type = "box", size = [0.1, 1.0, 0.1] }
+        kinematic = true
+    """, "still.toml")
+    with pytest.raises(SceneError, match="--seeds: the scene has no dynamic body or cloth for a seed to move"):
+        plan_wedge(still, {"bodies.post.friction": [0.1, 0.2]}, tmp_path / "w.usda", seeds=2)
+    assert plan_wedge(still, {"bodies.post.friction": [0.1, 0.2]}, tmp_path / "w.usda").takes[1].seed == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["still.toml"]  # planning writes nothing
