@@ -103,7 +103,7 @@ def _batch(args) -> int:
                     scheduler=args.scheduler, retries=args.retries, on_take=on_take, on_client=on_client)
     failed = [r for r in results if not r.baked]
     for result in failed:
-        print(f"simbake: error: {result.label}: {result.error}", file=sys.stderr)
+        print(f"simbake: error: {result.error}", file=sys.stderr)
     print(f"baked {len(results) - len(failed)} of {len(results)} scene(s) into {args.output_dir}"
           + (f"; {len(failed)} failed" if failed else ""))
     return 1 if failed else 0

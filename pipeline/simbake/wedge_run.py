@@ -105,7 +105,7 @@ def bake_scene(scene_file: str, output: str, threads: int) -> TakeResult:
     from .scene import load_scene
     from .simulate import bake
 
-    result = TakeResult(name=Path(scene_file).name, label=scene_file, worker=_worker_name())
+    result = TakeResult(name=scene_file, label="", worker=_worker_name())
     try:
         with _quiet():
             stats = bake(load_scene(scene_file), output, threads=threads)
@@ -354,7 +354,7 @@ def batch(scenes: Sequence, client=None, *, output_dir=None, threads: int = 1, w
     check_options("batch", workers, retries, scheduler)
     outputs = _check_batch(scene_files, folder)
     names = [f"{i:03d}-{Path(s).stem}" for i, s in enumerate(scene_files)]
-    blank = {n: TakeResult(name=Path(s).name, label=s) for n, s in zip(names, scene_files)}
+    blank = {n: TakeResult(name=s, label="") for n, s in zip(names, scene_files)}
     tasks = [(n, (s, str(o), threads)) for n, s, o in zip(names, scene_files, outputs)]
     try:
         by_name = _run(client, scheduler, workers, retries, bake_scene, tasks, blank, on_take, on_client)

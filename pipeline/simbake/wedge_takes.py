@@ -69,7 +69,7 @@ class TakeResult:
     """How one take (or one scene of a batch) ended: baked, or failed with a one-line error."""
 
     name: str
-    label: str                          # what it changes (a batch: the scene file)
+    label: str                          # what it changes (a batch's scene: "")
     seed: int = 0
     settings: dict = field(default_factory=dict)   # key -> value
     error: str | None = None            # None: baked
@@ -85,13 +85,15 @@ class TakeResult:
         return self.error is None
 
     def line(self) -> str:
-        """One line for the terminal."""
+        """One line for the terminal: a take with what it changes, a batch's scene with its cache."""
+        what = f" ({self.label})" if self.label else ""
         if self.error is not None:
-            return f"{self.name} failed ({self.label}): {self.error}"
+            return f"{self.name} failed{what}: {self.error}"
         f = self.figures
         return (f"{self.name} baked: {f.get('frames', '?')} frames, {f.get('wall_seconds', 0.0):.2f} s, "
                 f"max penetration {f.get('max_penetration', 0.0) * 1e3:.3f} mm"
-                + (f", {f['warnings']} QA warning(s)" if f.get("warnings") else "") + f" ({self.label})")
+                + (f", {f['warnings']} QA warning(s)" if f.get("warnings") else "")
+                + (what or f" -> {self.cache}"))
 
 
 def format_value(value: Any) -> str:

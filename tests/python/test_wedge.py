@@ -374,6 +374,19 @@ def test_wedge_command_with_a_failed_take_exits_1_and_writes_the_others(tmp_path
     assert (tmp_path / "w.takes" / "take_00.usdc").is_file() and (tmp_path / "w.usda").is_file()
 
 
+def test_batch_command_bakes_each_scene_and_exits_1_when_one_fails(tmp_path):
+    good, bad = tmp_path / "good.toml", tmp_path / "bad.toml"
+    good.write_text(BALLS.format(restitution=0.3, mass=1.0))
+    bad.write_text(BALLS.format(restitution=0.3, mass=0.0))
+    (tmp_path / "out").mkdir()
+    run = subprocess.run([SIMBAKE, "batch", "good.toml", "bad.toml", "-o", "out", "--workers", "1"],
+                         capture_output=True, text=True, timeout=TIMEOUT, cwd=tmp_path)
+    assert run.returncode == 1
+    assert "good.toml baked: 10 frames" in run.stdout and "-> out/good.usdc" in run.stdout
+    assert run.stderr.strip() == "simbake: error: bad.toml: bodies[1].mass: must be > 0, got 0.0"
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["good.qa.json", "good.usdc"]
+
+
 @pytest.mark.parametrize("arguments, message", [
     (["--set", "bodies.nope.mass=1,2"], "--set bodies.nope.mass: no body named 'nope' (bodies: ball, crate)"),
     (["--set", "bodies.ball.colour=1,2"], "--set bodies.ball.colour: unknown key 'colour' (allowed: "),
