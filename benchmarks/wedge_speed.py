@@ -141,9 +141,10 @@ def _flag_tables(flag: dict) -> list[str]:
         return statistics.median(x[0] / y[0] for x, y in zip(flag[a], flag[b]))
 
     rows = [[name, _median(runs, 0), min(r[0] for r in runs), max(r[0] for r in runs), _median(runs, 0) / 12,
-             _median(runs, 1)] for name, runs in flag.items()]
+             _median(runs, 1), statistics.median(cpu / wall for wall, cpu in runs)] for name, runs in flag.items()]
     return [
-        common.markdown_table(["way", "median wall s", "min", "max", "wall s per take", "median CPU s"], rows), "",
+        common.markdown_table(["way", "median wall s", "min", "max", "wall s per take", "median CPU s",
+                               "CPUs used (CPU s / wall s)"], rows), "",
         "Speed-ups (wall-time ratios within a round, median over rounds):", "",
         common.markdown_table(["ratio", "value"], [
             ["sequential-1 / wedge-2 (2 workers against one bake after another)", ratio("sequential-1", "wedge-2")],
@@ -170,13 +171,24 @@ def _tiny_tables(tiny: dict, n: int) -> list[str]:
     ]
 
 
+def _autogroup() -> str:
+    """Linux shares the CPUs between sessions first when autogroup is on: say so."""
+    try:
+        on = Path("/proc/sys/kernel/sched_autogroup_enabled").read_text().strip() == "1"
+    except OSError:
+        return ""
+    return (" The kernel schedules by session (`kernel.sched_autogroup_enabled = 1`): with other sessions busy,"
+            " all the processes of this one share one session's part of the CPUs, however many they are"
+            " (the last column).") if on else ""
+
+
 def _report(flag: dict, tiny: dict, args, command: str, load: tuple) -> str:
     return "\n".join([
         "# Wedges on Dask against sequential bakes", "",
         f"`{command}`", "",
         f"Load average (1 min) {load[0]:.1f} at the start, {load[1]:.1f} at the end, on 2 CPUs shared with other "
         "processes: wall times are this run's; CPU seconds (user + system of the whole process tree) do not "
-        "depend on the load as much.", "",
+        "depend on the load as much." + _autogroup(), "",
         f"12 takes of `assets/scenes/flag.toml` (frames 1-{args.frames}; {', '.join(FLAG_SETS)}; seeds 0, 1), "
         f"whole processes, {args.rounds} round(s), the four ways in turn:", "",
         *_flag_tables(flag), "",
@@ -198,10 +210,13 @@ def main() -> int:
     p.add_argument("--frames", type=int, default=13, help="the flag's last frame (its first frames)")
     p.add_argument("--tiny-takes", type=int, default=24)
     p.add_argument("--tiny-repeats", type=int, default=3)
+    p.add_argument("--report-only", action="store_true", help="write the tables again from the last run's JSON")
     args = p.parse_args()
     if args.command == "sequential":
         sequential(args.scene, args.sets, args.seeds, args.threads, args.out)
         return 0
+    if args.report_only:
+        return _rewrite_report()
     command = "python benchmarks/wedge_speed.py " + " ".join(sys.argv[1:])
     scratch = Path(tempfile.mkdtemp(prefix="wedge_speed-"))
     try:
@@ -216,6 +231,18 @@ def main() -> int:
     (common.RESULTS_DIR / "wedge_speed.json").write_text(json.dumps(
         {"command": command, "machine": info, "machine_after": common.load_average(), "flag_seconds": flag,
          "tiny_seconds": tiny, "frames": args.frames, "tiny_takes": args.tiny_takes}, indent=1) + "\n")
+    print(text)
+    return 0
+
+
+def _rewrite_report() -> int:
+    data = json.loads((common.RESULTS_DIR / "wedge_speed.json").read_text())
+    args = argparse.Namespace(frames=data["frames"], tiny_takes=data["tiny_takes"],
+                              rounds=len(data["flag_seconds"]["wedge-1"]),
+                              tiny_repeats=len(data["tiny_seconds"]["wedge-1"]))
+    text = _report(data["flag_seconds"], data["tiny_seconds"], args, data["command"],
+                   (data["machine"]["load_average_1_5_15_min"][0], data["machine_after"][0]))
+    (common.RESULTS_DIR / "wedge_speed.md").write_text(text)
     print(text)
     return 0
 
