@@ -10,7 +10,9 @@ A worker that dies during a task (killed, out of memory, its machine lost) makes
 scheduler run the task again elsewhere, at most ``retries`` more times (the scheduler's
 ``distributed.scheduler.allowed-failures``: set here for a local cluster; a farm's scheduler
 has its own, 3 by default); past that the task ends with Dask's KilledWorker, reported as
-that bake's failure. A task raising an exception is not run again (a bake is deterministic:
+that bake's failure. Tasks are handed to the scheduler only as workers have threads free
+for them, since the scheduler counts every task a dead worker held, queued or running,
+against its bound. A task raising an exception is not run again (a bake is deterministic:
 it would fail the same way); bake functions report their expected failures as results.
 
 Dask is imported here only, and only when a wedge or batch runs.
@@ -20,7 +22,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
+import time
 import uuid
 from typing import Any, Callable, Iterator, Sequence
 
@@ -30,6 +34,7 @@ DEFAULT_RETRIES = 2                 # runs of a task after its worker died, beyo
 MAX_RETRIES = 100
 MAX_WORKERS = 1024                  # processes of a local cluster
 CONNECT_TIMEOUT = "20s"             # to reach a farm's scheduler
+POLL_SECONDS = 0.02                 # between looks at the running tasks
 INSTALL_HINT = "install the wedge extra: pip install 'simbake[wedge]' (make install does)"
 
 
@@ -98,30 +103,58 @@ def describe_client(client) -> str:
     return f"{len(workers)} Dask worker(s) ({threads} thread(s)) at {client.scheduler.address}; dashboard {link}"
 
 
-def _failure(future, error: BaseException) -> str:
-    """A task's exception as a one-line error."""
+def _outcome(future) -> tuple[Any, str | None]:
+    """(result, None) of a finished task, or (None, its failure in one line)."""
+    if future.status == "finished":
+        return future.result(), None
+    if future.status == "cancelled":
+        return None, "cancelled before it ended (by the scheduler, or another client)"
+    error = future.exception()
     if type(error).__name__ == "KilledWorker":
-        return (f"its worker died {getattr(error, 'allowed_failures', 0) + 1} time(s) baking it "
-                "(killed or out of memory); not tried again")
+        return None, (f"its worker died {getattr(error, 'allowed_failures', 0) + 1} time(s) baking it "
+                      "(killed or out of memory); not tried again")
     first = (str(error).strip().splitlines() or [""])[0]
-    return f"internal error: {type(error).__name__}: {first}"
+    return None, f"internal error: {type(error).__name__}: {first}"
+
+
+class _Capacity:
+    """Tasks the cluster runs at once: its workers' threads (at least one), asked of the
+    scheduler at most once a second (workers join and leave)."""
+
+    def __init__(self, client):
+        self.client, self.value, self.asked = client, 1, -math.inf
+
+    def __call__(self) -> int:
+        if time.monotonic() - self.asked > 1.0:
+            self.value = max(1, sum(self.client.nthreads().values()))
+            self.asked = time.monotonic()
+        return self.value
 
 
 def run_tasks(client, function: Callable, tasks: Sequence[tuple[str, tuple]],
               on_result: Callable[[str, Any, str | None], None]) -> None:
-    """Submit `function(*args)` for each (name, args) and call on_result(name, result, error)
-    as each ends, in the order they end: `error` is a one-line description when the task
-    raised or its workers kept dying, else None."""
+    """Run `function(*args)` for each (name, args) and call on_result(name, result, error) as
+    each ends, in the order they end: `error` is a one-line description when the task raised
+    or its workers kept dying, else None.
+
+    No more tasks are given to the scheduler than the workers have threads (topped up as
+    tasks end and workers join): a task waiting on a worker would be counted as a victim of
+    that worker's death, and bounded retries would fail takes that never ran."""
     _, distributed = _distributed()
     token = uuid.uuid4().hex[:8]
-    futures = {client.submit(function, *args, key=f"simbake-{name}-{token}", pure=False, retries=0): name
-               for name, args in tasks}
+    waiting, names, capacity = list(reversed(tasks)), {}, _Capacity(client)
+    running = distributed.as_completed(loop=client.loop)
     try:
-        for future in distributed.as_completed(list(futures)):
-            name = futures[future]
-            if future.status == "finished":
-                on_result(name, future.result(), None)
-            else:
-                on_result(name, None, _failure(future, future.exception()))
+        while waiting or not running.is_empty():
+            while waiting and running.count() < capacity():
+                name, args = waiting.pop()
+                future = client.submit(function, *args, key=f"simbake-{name}-{token}", pure=False, retries=0)
+                names[future.key] = name
+                running.add(future)
+            ended = running.next_batch(block=False)
+            for future in ended:
+                on_result(names[future.key], *_outcome(future))
+            if not ended:
+                time.sleep(POLL_SECONDS)
     finally:
-        client.cancel(list(futures))  # an interrupted run leaves nothing queued on a farm
+        client.cancel(list(running.futures))  # an interrupted run leaves nothing queued on a farm

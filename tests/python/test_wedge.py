@@ -304,6 +304,33 @@ def test_a_worker_killed_mid_bake_loses_nothing(tmp_path):
     assert first_difference(again.cache, expected) is None
 
 
+def test_retries_are_bounded_a_take_whose_worker_keeps_dying_fails_alone(tmp_path):
+    from distributed import Client
+
+    scene = tmp_path / "sheet.toml"
+    scene.write_text(SHEET.format(frames=36, stiffness=1000.0))
+    cluster = _local_cluster(allowed_failures=0)  # no second run: one death fails the take
+    stop, killed = threading.Event(), []
+    watcher = threading.Thread(target=_kill_first_bake, args=(tmp_path, stop, killed), daemon=True)
+    try:
+        with Client(cluster) as client:
+            watcher.start()
+            results = simbake.wedge(scene, {"cloths.sheet.stretch_stiffness": [500.0, 1000.0, 2000.0]}, client,
+                                    output=tmp_path / "w.usda")
+    finally:
+        stop.set()
+        cluster.close(timeout=30)
+    assert killed, "no bake was caught running"
+    dead = next(r for r in results if r.name == killed[0][0])
+    assert dead.error == "its worker died 1 time(s) baking it (killed or out of memory); not tried again"
+    assert [r.baked for r in results].count(True) == 2 and not _temps(tmp_path)
+    assert not (tmp_path / "w.takes" / f"{dead.name}.usdc").exists()
+    from pxr import Sdf
+
+    failed = Sdf.Layer.FindOrOpen(str(tmp_path / "w.usda")).customLayerData["simbake"]["wedge"]["failed"]
+    assert failed[dead.name]["error"] == dead.error
+
+
 # --------------------------------------------------------------------------------------
 # The farm path: dask scheduler and dask worker on localhost
 # --------------------------------------------------------------------------------------
