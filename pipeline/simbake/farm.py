@@ -100,7 +100,10 @@ def describe_client(client) -> str:
     workers = info.get("workers", {})
     threads = sum(w.get("nthreads", 0) for w in workers.values())
     link = client.dashboard_link if info.get("services", {}).get("dashboard") else "none (install bokeh)"
-    return f"{len(workers)} Dask worker(s) ({threads} thread(s)) at {client.scheduler.address}; dashboard {link}"
+    shared = any(w.get("nthreads", 1) > 1 for w in workers.values())
+    return (f"{len(workers)} Dask worker(s) ({threads} thread(s)) at {client.scheduler.address}; dashboard {link}"
+            + ("; some workers have several threads and bake side by side in one process: start them with "
+               "`dask worker --nthreads 1`" if shared else ""))
 
 
 def _outcome(future) -> tuple[Any, str | None]:
