@@ -56,7 +56,7 @@ $(VENV)/.build-requires: | build/.system-packages
 
 # The package, editable: Python changes need no reinstall; C++ changes rebuild incrementally
 $(VENV)/.installed: $(VENV)/.build-requires $(SOURCES)
-	$(PY) -m pip install -q --no-build-isolation -e '.[test,preview]' \
+	$(PY) -m pip install -q --no-build-isolation -e '.[test,preview,wedge]' \
 	  -Cbuild-dir=$(BUILD) -Ccmake.define.SIMBAKE_BUILD_TESTS=ON
 	touch $@
 

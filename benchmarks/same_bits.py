@@ -86,6 +86,10 @@ def first_difference(path_a: Path, path_b: Path) -> str | None:
         if path == Sdf.Path.absoluteRootPath:
             continue
         spec_a, spec_b = a.GetObjectAtPath(path), b.GetObjectAtPath(path)
+        if spec_a is None or spec_b is None:  # a target or connection path: its owner compares it
+            if (spec_a is None) != (spec_b is None):
+                return f"{path}: a spec in one cache only"
+            continue
         keys = sorted(set(spec_a.ListInfoKeys()) | set(spec_b.ListInfoKeys()))
         for key in keys:
             if key == "timeSamples":

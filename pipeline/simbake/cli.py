@@ -7,6 +7,8 @@
     simbake preview CACHE.usdc [-o OUT.png|.mp4|.gif] renders it headless (contact sheet or movie)
     simbake report CACHE.usdc [-o OUT.html|.png]      one page of its QA figures
     simbake levelset MESH -o OUT.vdb [--voxel-size H] bakes one mesh's level set
+    simbake wedge SCENE --set KEY=V1,V2,... [--seeds N] [-o OUT.usda] [--scheduler tcp://HOST:PORT]
+    simbake batch SCENE... [-o DIR] [--scheduler tcp://HOST:PORT]   many bakes on Dask (simbake.wedge_cli)
 
 Bad input ends with one line on stderr naming the file, the key and the problem, exit
 status 2, no traceback and no output file. A failed check exits with status 1. Signals,
@@ -131,8 +133,16 @@ def _levelset(mesh: str, output: str, voxel_size: float | None) -> int:
     return 0
 
 
-def _preview(cache: str, output: str | None, frames: str | None, camera: str, size: str | None) -> int:
+def _preview(cache: str, output: str | None, frames: str | None, camera: str, size: str | None,
+             wedges: bool = False) -> int:
     from .preview import parse_size, write_preview
+
+    if wedges:
+        from .wedge_preview import write_wedge_sheet
+
+        out, count = write_wedge_sheet(cache, output, frames=frames, size=parse_size(size) if size else None)
+        print(f"previewed {count} take(s) of {cache} -> {out}")
+        return 0
 
     out, count = write_preview(cache, output, frames=frames, camera=camera,
                                size=parse_size(size) if size else None)
@@ -142,6 +152,11 @@ def _preview(cache: str, output: str | None, frames: str | None, camera: str, si
 
 def _report(cache: str, output: str | None) -> int:
     from .report import write_report
+    from .wedge_report import is_wedge, write_wedge_report
+
+    if is_wedge(cache):
+        print(f"reported {cache} -> {write_wedge_report(cache, output)}")
+        return 0
 
     print(f"reported {cache} -> {write_report(cache, output)}")
     return 0
@@ -176,6 +191,8 @@ def parser() -> argparse.ArgumentParser:
     pv.add_argument("--frames", help="A:B[:STEP] or A; default: every frame (movie), 8 evenly spaced (sheet)")
     pv.add_argument("--camera", default="auto", help="auto (frames the whole animation) or a Camera prim's path")
     pv.add_argument("--size", help="WxH of each frame; default 960x540 (movie), 480x270 (sheet)")
+    pv.add_argument("--wedges", action="store_true",
+                    help="a wedge stage (simbake wedge): a contact sheet (.png), one row per take")
     r = sub.add_parser("report", help="one page of a cache's QA figures, profile, settings and frames")
     r.add_argument("cache")
     r.add_argument("-o", "--output", help="REPORT.html (default CACHE.report.html) or REPORT.png")
@@ -183,6 +200,9 @@ def parser() -> argparse.ArgumentParser:
     ls.add_argument("mesh")
     ls.add_argument("-o", "--output", required=True, help="output .vdb")
     ls.add_argument("--voxel-size", type=float, default=None, help="voxel size (m); default automatic")
+    from .wedge_cli import add_parsers
+
+    add_parsers(sub)
     return p
 
 
@@ -205,7 +225,11 @@ def _main(argv: list[str] | None) -> int:
         if args.command == "report":
             return _report(args.cache, args.output)
         if args.command == "preview":
-            return _preview(args.cache, args.output, args.frames, args.camera, args.size)
+            return _preview(args.cache, args.output, args.frames, args.camera, args.size, args.wedges)
+        if args.command in ("wedge", "batch"):
+            from .wedge_cli import run
+
+            return run(args)
         return _levelset(args.mesh, args.output, args.voxel_size)
     except SceneError as error:
         print(f"simbake: error: {error}", file=sys.stderr)

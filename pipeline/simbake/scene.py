@@ -230,6 +230,9 @@ _CLOTH_KEYS = (
     "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator", "self_collision",
 )  # fmt: skip
 _GRID_KEYS = ("size", "resolution")
+# the keys each table allows (simbake.wedge_takes checks --set key paths against it)
+TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KEYS, "bodies": _BODY_KEYS,
+              "cloths": _CLOTH_KEYS, "bodies.shape": _ANY_SHAPE_KEYS, "cloths.grid": _GRID_KEYS}
 
 
 USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -243,12 +246,30 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
         from .usd_scene import load_shot  # pxr is loaded only for USD shots
 
         return load_shot(path)
-    # Canonical directory (no "..", as the OS would walk it), but the file's own name is
-    # kept, so a symlinked scene file finds meshes beside the link, as USD layers do.
+    return scene_from_data(read_scene_data(file), file)
+
+
+def _scene_path(file: str) -> Path:
+    """Canonical directory (no "..", as the OS would walk it), but the file's own name is
+    kept, so a symlinked scene file finds meshes beside the link, as USD layers do."""
     given = Path(file).absolute()
-    base_dir = given.parent.resolve()
-    scene_path = base_dir / given.name
-    root = _Table(file, "", _read_toml(file, scene_path), _TOP_KEYS)
+    return given.parent.resolve() / given.name
+
+
+def read_scene_data(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A TOML scene file's parsed tables, not yet validated (see :func:`scene_from_data`)."""
+    file = os.fspath(path)
+    return _read_toml(file, _scene_path(file))
+
+
+def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene:
+    """Validate parsed TOML tables as the scene file at `path` would be (paths relative to it,
+    messages naming it): what load_scene does after reading. A wedge edits the tables of a
+    scene file and validates each take's through here (simbake.wedge_takes)."""
+    file = os.fspath(path)
+    scene_path = _scene_path(file)
+    base_dir = scene_path.parent
+    root = _Table(file, "", data, _TOP_KEYS)
 
     settings = root.subtable("scene", _SCENE_KEYS, required=True)
     start_frame = settings.integer("start_frame", Scene.start_frame)
