@@ -15,6 +15,8 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
+
 from .errors import SceneError
 
 # --- the physical range (SI units) -------------------------------------------------------
@@ -31,6 +33,7 @@ STIFFNESS = 1e12        # N/m (a cloth's stretch stiffness)
 BEND = 1e6              # N m
 DAMPING = 1e3           # s
 STRAIN = 1e3            # a strain limit
+INERTIA_TOLERANCE = 1e-6  # relative slack of an inertia tensor's symmetry and triangle inequality
 FRICTION = 1e3          # a friction coefficient
 KEY_TIME = 1e9          # s
 FRAME_NUMBER = 2 ** 53  # |frame|: time codes are doubles, exact only up to here
@@ -48,6 +51,8 @@ FRAME_INDEX_BYTES = 16           # file bytes per sampled attribute and frame, b
 
 
 def _error(scene, key: str, problem: str) -> SceneError:
+    """The problem at a scene key, named where the user wrote it (a shot's prim and attribute)."""
+    key = scene.source_key(key) if hasattr(scene, "source_key") else key
     return SceneError(scene.source or scene.path, key, problem)
 
 
@@ -98,6 +103,7 @@ def check_scene(scene) -> None:
         _vector(scene, f"{key}.angular_velocity", b.angular_velocity, SPEED, "rad/s")
         _range(scene, f"{key}.friction", b.friction, None, FRICTION)
         _range(scene, f"{key}.voxel_size", b.voxel_size, None, LENGTH, "m")
+        _check_mass_distribution(scene, key, b)
         for k, keyed in enumerate(b.keys):
             _range(scene, f"{key}.keys[{k}].time", keyed.time, None, KEY_TIME, "s")
             _vector(scene, f"{key}.keys[{k}].position", keyed.position, LENGTH, "m")
@@ -116,6 +122,30 @@ def check_scene(scene) -> None:
         _range(scene, f"{key}.strain_limit", c.strain_limit, None, STRAIN)
         _range(scene, f"{key}.friction", c.friction, None, FRICTION)
         _range(scene, f"{key}.thickness", c.thickness, None, THICKNESS, "m")
+
+
+def _check_mass_distribution(scene, key: str, body) -> None:
+    """A given centre of mass must be finite; a given inertia tensor that of some real body:
+    symmetric, positive definite, and no principal moment larger than the other two together
+    (the triangle inequality every mass distribution satisfies)."""
+    if body.center_of_mass is not None and not np.isfinite(np.asarray(body.center_of_mass, dtype=float)).all():
+        raise _error(scene, f"{key}.center_of_mass", "must be three finite numbers")
+    if body.inertia is None:
+        return
+    tensor = np.asarray(body.inertia, dtype=np.float64)
+    if tensor.shape != (3, 3) or not np.isfinite(tensor).all():
+        raise _error(scene, f"{key}.inertia", "must be a finite 3 x 3 tensor")
+    scale = float(np.abs(tensor).max())
+    if np.abs(tensor - tensor.T).max() > INERTIA_TOLERANCE * scale:
+        raise _error(scene, f"{key}.inertia", "must be symmetric")
+    moments = np.linalg.eigvalsh(tensor)
+    if not moments[0] > 0:
+        raise _error(scene, f"{key}.inertia", f"must be positive definite (principal moments "
+                                              f"{', '.join(f'{m:g}' for m in moments)} kg m^2)")
+    if moments[2] > (moments[0] + moments[1]) * (1 + INERTIA_TOLERANCE):
+        raise _error(scene, f"{key}.inertia", f"principal moments {', '.join(f'{m:g}' for m in moments)} kg m^2 "
+                                              "are not those of any body: the largest must not exceed the sum of "
+                                              "the other two (triangle inequality)")
 
 
 def check_mesh_extent(vertices, file, key: str, path) -> None:
