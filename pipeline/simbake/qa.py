@@ -120,7 +120,7 @@ class QualityRecorder:
         f["wall_seconds"].append(float(wall_seconds))
         f["kinetic_energy"].append(float(world.statistics()["kinetic_energy"]))
         if self.motion is not None:
-            self._record_motion(frame, world, origins)
+            self._record_motion(frame, world, origins, quality["body_penetration"][0] > BODY_PENETRATION)
         depth, a, b = quality["body_penetration"]
         f["body_penetration"].append(float(depth))
         f["body_penetration_between"].append(
@@ -139,9 +139,9 @@ class QualityRecorder:
         f["cloth_strain"].append(strain)
         f["cloth_self_intersections"].append(crossings)
 
-    def _record_motion(self, frame: int, world, origins) -> None:
+    def _record_motion(self, frame: int, world, origins, overlapping: bool) -> None:
         time = (frame - self.scene.start_frame) / self.scene.fps
-        m = self.motion.record(world, time, origins)
+        m = self.motion.record(world, time, origins, overlapping)
         f = self.figures
         if len(self.frames) == 1:  # before any step the core has no statistics yet
             f["kinetic_energy"][-1] = self.motion.largest_kinetic

@@ -3,7 +3,9 @@ bodies' states at every written frame.
 
 * ``energy_gain`` (J): the total energy now less the energy at the start, E(f) - E(start),
   with E = kinetic + gravitational potential (dynamic bodies and cloths) + the cloths' elastic
-  energy. Without a source of energy (a keyed or moving kinematic body) friction, damping and
+  energy. When bodies start inside each other (deeper than the penetration threshold), the
+  count starts at the first frame they no longer are: pushing them apart makes energy, and
+  the penetration figure already says why. Without a source of energy (a keyed or moving kinematic body) friction, damping and
   inelastic contact can only take energy away, so a gain is the solver making it up (an
   impossible inertia, too few substeps). Threshold: ``ENERGY_GAIN`` of the largest kinetic
   energy of the bake, plus the energy of everything falling ``ENERGY_FLOOR_HEIGHT`` and
@@ -63,7 +65,7 @@ class MotionFigures:
         self.cloth_masses = cloth_masses
         self.total_mass = float(self.masses[self.dynamic].sum() + sum(m.sum() for m in cloth_masses))
         self.start_time = None
-        self.start_energy = 0.0
+        self.start_energy = None  # the baseline: at the start, or once a starting overlap is gone
         self.start_speed = 0.0
         self.largest_kinetic = 0.0
         self._speeds = None       # each dynamic body's speed at the last frame (m/s)
@@ -96,25 +98,27 @@ class MotionFigures:
 
     # -- per frame ---------------------------------------------------------------------------
 
-    def record(self, world, time: float, origins: np.ndarray) -> dict:
-        """The figures of `world` at `time` (s); `origins` (bodies, 3) are the mesh origins."""
+    def record(self, world, time: float, origins: np.ndarray, overlapping: bool = False) -> dict:
+        """The figures of `world` at `time` (s); `origins` (bodies, 3) are the mesh origins;
+        `overlapping`: bodies are inside each other deeper than the penetration threshold."""
         velocities, kinetic, potential, fastest = self._rigid(world)
         speeds = np.linalg.norm(velocities, axis=1)
         if self.start_time is None:
             self.start_time = time
-            self.start_energy = self._start_energy(world, kinetic, potential)
+            energy = self._start_energy(world, kinetic, potential)
             self.start_speed = fastest
-            energy = self.start_energy
         else:
             stats = world.statistics()
             energy = stats["kinetic_energy"] + stats["potential_energy"] + stats["elastic_energy"]
             kinetic = stats["kinetic_energy"]
+        if self.start_energy is None and not overlapping:
+            self.start_energy = energy
         self.largest_kinetic = max(self.largest_kinetic, kinetic)
         stop, stopped = self._unexplained_stop(world, speeds, origins)
         self._speeds, self._origins = speeds, np.array(origins, dtype=np.float64)
         free = self.start_speed + float(np.linalg.norm(self.gravity)) * (time - self.start_time)
         fastest = int(np.argmax(speeds)) if len(speeds) else -1
-        return {"energy_gain": max(0.0, energy - self.start_energy),
+        return {"energy_gain": max(0.0, energy - self.start_energy) if self.start_energy is not None else 0.0,
                 "unexplained_stop": stop, "stopped_body": stopped,
                 "imparted_speed": max(0.0, float(speeds.max(initial=0.0)) - free),
                 "fastest_body": int(np.flatnonzero(self.dynamic)[fastest]) if fastest >= 0 else -1}
@@ -171,6 +175,14 @@ def lumped_masses(vertices: np.ndarray, triangles: np.ndarray, area_density: flo
     for k in range(3):
         np.add.at(masses, triangles[:, k], third)
     return masses
+
+
+def mean_edge(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """The mean length of a mesh's triangle edges (each counted once per triangle side) (m)."""
+    if not len(triangles):
+        return 0.0
+    p = vertices[triangles]
+    return float(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).mean())
 
 
 def bounding_radius(vertices: np.ndarray) -> float:

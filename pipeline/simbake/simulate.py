@@ -19,10 +19,10 @@ from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
 from .outputs import Outputs, check_outputs
-from .limits import check_budget, check_scene
+from .limits import check_budget, check_memory_in_flight, check_scene, crowding
 from .normals import corner_normals
 from .qa import QualityRecorder, qa_path
-from .qa_motion import MotionFigures, bounding_radius, lumped_masses
+from .qa_motion import MotionFigures, bounding_radius, lumped_masses, mean_edge
 from .scene import Scene
 from .usd_instancer import quaternion_rate
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
@@ -311,6 +311,7 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
                 raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
                                       "nothing was written (try more [solver] substeps)")
             max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
+            check_memory_in_flight(scene, frame)
         written = time.perf_counter()
         stepping = written - frame_start
         current = _frame_state(frame, world, cloth_count)
@@ -368,7 +369,9 @@ def bake(scene: Scene, output: str | Path, *,
     cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
     world = build_world(scene, assets, cloths, threads=threads)
     check_budget(scene, output, scene.substeps or world.automatic_substeps(1.0 / scene.fps),
-                 sum(_moves(body) for body in scene.bodies), [len(c.vertices) for c in cloths])
+                 sum(_moves(body) for body in scene.bodies),
+                 [(len(a.vertices), crowding(c.thickness, mean_edge(a.vertices, a.triangles)))
+                  for c, a in zip(scene.cloths, cloths)])
     try:
         return _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, instancing, clips)
     except Exception as error:
