@@ -38,10 +38,13 @@ RUN = """
 import json, resource, sys
 from pathlib import Path
 import simbake
-from simbake.limits import estimated_memory
+from simbake.assets import load_cloth
+from simbake.limits import crowding, estimated_memory
+from simbake.qa_motion import mean_edge
 scene = simbake.load_scene(sys.argv[1])
-vertices = [c.grid_resolution[0] * c.grid_resolution[1] for c in scene.cloths]
-estimate = estimated_memory(scene.frame_count, vertices, 0, Path(sys.argv[2]))
+cloths = [(len(a.vertices), crowding(c.thickness, mean_edge(a.vertices, a.triangles)))
+          for c, a in zip(scene.cloths, (load_cloth(scene, i) for i in range(len(scene.cloths))))]
+estimate = estimated_memory(scene.frame_count, cloths, 0, Path(sys.argv[2]))
 simbake.bake(scene, sys.argv[2], threads=1)
 print(json.dumps({"estimate": estimate, "peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
 """

@@ -654,7 +654,6 @@ class _Reader:
         shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body")
         friction, restitution, material_density = self._material(colliders[0][0].GetPath(), colliders[0][1])
         self._body_keys(index, path, colliders[0][0].GetPath(), self.material_path)
-        self._instance_roots(prim)
         for c, s in colliders[1:]:
             if self._material(c.GetPath(), s)[:2] != (friction, restitution):
                 self.warn(path, "colliders with different physics materials; simbake uses the first one's")
@@ -678,6 +677,7 @@ class _Reader:
             keys=keys, center_of_mass=com, inertia=inertia, prim_path=path)
         if kinematic:
             return body, None  # the input's own animation already says where it is
+        self._instance_roots(prim)  # the cache writes its pose: composition must read it
         return body, self._shot_body(prim, index, k)
 
     def _body_keys(self, index: int, path, collider, material) -> None:
