@@ -47,7 +47,7 @@ DEFAULT_MEMORY = 8 * 2 ** 30     # bytes, or half the machine's memory when that
 # The memory model of a bake, fitted to measured peaks (benchmarks/memory/cloth_peak.py,
 # resource.getrusage's peak resident set, one thread; benchmarks/results/memory_estimate.md):
 #   BASE + per cloth, vertices x (CLOTH_VERTEX_BYTES + ramp x SELF_COLLISION_BYTES x
-#                                  max(0, crowding - CROWDING_FLOOR) + buffered frames x CLOTH_SAMPLE_BYTES)
+#                                  crowding ^ CROWDING_EXPONENT + buffered frames x CLOTH_SAMPLE_BYTES)
 #        + moving bodies x frames x RIGID_SAMPLE_BYTES  (+ the whole cache once for .usda)
 # crowding = (thickness / mean rest edge)^2: once the sheet bends, the self-collision keeps the
 # pairs of its elements closer than the thickness, more per vertex as the thickness grows
@@ -57,9 +57,10 @@ CLOTH_VERTEX_BYTES = 9728        # the cloth solver per vertex (measured 8.6-9.9
 CLOTH_SAMPLE_BYTES = 40          # the writer per cloth vertex and frame held until a save
                                  # (points, normals, velocities as float32: 36 B, and Vt's own)
 BUFFERED_FRAMES = 50             # frames the writer holds between saves (CacheWriter.flush_every)
-SELF_COLLISION_BYTES = 17600     # per vertex and unit of crowding past the floor, for a sheet that
-CROWDING_FLOOR = 0.084           # bends and swings (one that folds into layers keeps up to 4x
-                                 # more: README, "Limits that remain")
+SELF_COLLISION_BYTES = 30720     # per vertex at crowding 1, for a sheet that bends and swings
+CROWDING_EXPONENT = 1.7          # (fitted from crowding 0.08 to 0.71: 64^2 to 384^2 vertices on
+                                 # 2 m at 5 mm; one that folds into layers keeps up to 4x more:
+                                 # README, "Limits that remain")
 SELF_COLLISION_FRAMES = 13       # frames by which they have all appeared (measured: none at 2, all at 13)
 RIGID_SAMPLE_BYTES = 120         # writer memory per dynamic body and frame (USD holds rigid
                                  # samples unpacked until the file is closed: ~60 B each)
@@ -125,23 +126,28 @@ def check_scene(scene) -> None:
             _range(scene, f"{key}.keys[{k}].time", keyed.time, None, KEY_TIME, "s")
             _vector(scene, f"{key}.keys[{k}].position", keyed.position, LENGTH, "m")
     for i, c in enumerate(scene.cloths):
-        key = f"cloths[{i}]"
-        if c.grid_size is not None:
-            _vector(scene, f"{key}.grid.size", c.grid_size, LENGTH, "m", SMALLEST)
-            vertices = c.grid_resolution[0] * c.grid_resolution[1]
-            dx, dz = (size / (n - 1) for size, n in zip(c.grid_size, c.grid_resolution))
-            edge = (dx + dz + math.hypot(dx, dz)) / 3  # the mean of a grid triangle's sides
-            _memory(scene, f"{key}.grid.resolution",
-                    estimated_memory(scene.frame_count, [(vertices, crowding(c.thickness, edge))], 0, Path("x.usdc")),
-                    f"a {c.grid_resolution[0]} x {c.grid_resolution[1]} cloth")
-        _vector(scene, f"{key}.position", c.position, LENGTH, "m")
-        _range(scene, f"{key}.area_density", c.area_density, *AREA_DENSITY, "kg/m^2")
-        _range(scene, f"{key}.stretch_stiffness", c.stretch_stiffness, None, STIFFNESS, "N/m")
-        _range(scene, f"{key}.bend_stiffness", c.bend_stiffness, None, BEND, "N m")
-        _range(scene, f"{key}.damping", c.damping, None, DAMPING, "s")
-        _range(scene, f"{key}.strain_limit", c.strain_limit, None, STRAIN)
-        _range(scene, f"{key}.friction", c.friction, None, FRICTION)
-        _range(scene, f"{key}.thickness", c.thickness, None, THICKNESS, "m")
+        _check_cloth(scene, f"cloths[{i}]", c)
+
+
+def _check_cloth(scene, key: str, c) -> None:
+    """A cloth's physical range, then (a grid's size known) the memory its solver needs."""
+    if c.grid_size is not None:
+        _vector(scene, f"{key}.grid.size", c.grid_size, LENGTH, "m", SMALLEST)
+    _vector(scene, f"{key}.position", c.position, LENGTH, "m")
+    _range(scene, f"{key}.area_density", c.area_density, *AREA_DENSITY, "kg/m^2")
+    _range(scene, f"{key}.stretch_stiffness", c.stretch_stiffness, None, STIFFNESS, "N/m")
+    _range(scene, f"{key}.bend_stiffness", c.bend_stiffness, None, BEND, "N m")
+    _range(scene, f"{key}.damping", c.damping, None, DAMPING, "s")
+    _range(scene, f"{key}.strain_limit", c.strain_limit, None, STRAIN)
+    _range(scene, f"{key}.friction", c.friction, None, FRICTION)
+    _range(scene, f"{key}.thickness", c.thickness, None, THICKNESS, "m")
+    if c.grid_size is not None:  # once the thickness is known to be in range
+        vertices = c.grid_resolution[0] * c.grid_resolution[1]
+        dx, dz = (size / (n - 1) for size, n in zip(c.grid_size, c.grid_resolution))
+        edge = (dx + dz + math.hypot(dx, dz)) / 3  # the mean of a grid triangle's sides
+        _memory(scene, f"{key}.grid.resolution",
+                estimated_memory(scene.frame_count, [(vertices, crowding(c.thickness, edge))], 0, Path("x.usdc")),
+                f"a {c.grid_resolution[0]} x {c.grid_resolution[1]} cloth")
 
 
 def _check_mass_distribution(scene, key: str, body) -> None:
@@ -205,8 +211,9 @@ def _memory(scene, key: str, needed: float, what: str) -> None:
 
 
 def crowding(thickness: float, mean_edge: float) -> float:
-    """(thickness / mean rest edge)^2: how many self-collision pairs a vertex keeps, relatively."""
-    return (thickness / mean_edge) ** 2 if mean_edge > 0 else 0.0
+    """(thickness / mean rest edge)^2: how many self-collision pairs a vertex keeps, relatively
+    (the ratio capped at 1e6: beyond any real sheet, and no overflow)."""
+    return min(thickness / mean_edge, 1e6) ** 2 if mean_edge > 0 else 0.0
 
 
 def estimated_memory(frames: int, cloths: list[tuple[int, float]], dynamic_bodies: int, output: Path) -> int:
@@ -214,7 +221,7 @@ def estimated_memory(frames: int, cloths: list[tuple[int, float]], dynamic_bodie
     cloth's (vertices, crowding)."""
     ramp = min(1.0, max(0.0, (frames - 2) / (SELF_COLLISION_FRAMES - 2)))
     per_frame = min(frames, BUFFERED_FRAMES) * CLOTH_SAMPLE_BYTES
-    cloth = sum(n * (CLOTH_VERTEX_BYTES + ramp * SELF_COLLISION_BYTES * max(0.0, c - CROWDING_FLOOR) + per_frame)
+    cloth = sum(n * (CLOTH_VERTEX_BYTES + ramp * SELF_COLLISION_BYTES * c ** CROWDING_EXPONENT + per_frame)
                 for n, c in cloths)
     vertices = sum(n for n, _ in cloths)
     text = frames * vertices * TEXT_SAMPLE_BYTES if Path(output).suffix.lower() == ".usda" else 0
