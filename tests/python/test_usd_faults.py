@@ -63,10 +63,40 @@ def box(attributes: str = "") -> str:
     return BOX.format(attributes=attributes)
 
 
+def in_process(directory: Path, *args: str) -> subprocess.CompletedProcess:
+    """`simbake ARGS` run in this process in `directory` (no interpreter start per case), its
+    stdout and stderr caught at the file descriptors, so OpenUSD's own C++ output is too."""
+    import contextlib
+    import os
+    import tempfile
+
+    from simbake.cli import main
+
+    streams = [tempfile.TemporaryFile(mode="w+") for _ in range(2)]
+    saved = [os.dup(1), os.dup(2)]
+    cwd = os.getcwd()
+    try:
+        for fd, stream in zip((1, 2), streams):
+            os.dup2(stream.fileno(), fd)
+        os.chdir(directory)
+        with contextlib.redirect_stdout(streams[0]), contextlib.redirect_stderr(streams[1]):
+            status = main(list(args))
+    finally:
+        os.chdir(cwd)
+        for fd, copy in zip((1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
+    for stream in streams:
+        stream.flush()
+        stream.seek(0)
+    out, err = (stream.read() for stream in streams)
+    return subprocess.CompletedProcess(args, status, out, err)
+
+
 def refused(tmp_path: Path, path: Path, *words: str) -> str:
     """Bake `path`: one line, exit 2, each of `words` in it, no OpenUSD text, nothing written."""
     before = listing(tmp_path)
-    result = simbake("bake", path.name, "-o", "out.usdc", "-q", cwd=tmp_path)
+    result = in_process(tmp_path, "bake", path.name, "-o", "out.usdc", "-q")
     line = assert_one_line_error(result)
     assert line.startswith(f"simbake: error: {path.name}: ") or "line" in line, line
     for word in words:
