@@ -15,6 +15,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "checked_triangles.h"  // before any use of Triangles: its own caster (checked)
 #include "geometry/mass_properties.h"
 #include "geometry/mesh.h"
 #include "geometry/triangle_intersection.h"
@@ -202,7 +203,7 @@ void bind_geometry(py::module_& m) {
           std::vector<std::pair<int, int>> pairs;
           {
             py::gil_scoped_release release;
-            pairs = intersecting_triangle_pairs(v, t);
+            pairs = intersecting_triangle_pairs(v, t, kPairTestBudget);  // length_error past it
           }
           Eigen::Matrix<std::int32_t, Eigen::Dynamic, 2, Eigen::RowMajor> out(pairs.size(), 2);
           for (size_t k = 0; k < pairs.size(); ++k) out.row(k) << pairs[k].first, pairs[k].second;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <map>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 namespace simbake {
@@ -39,7 +40,10 @@ namespace {
 // coordinates, so the result is watertight. map_point turns a cube point into the final one.
 template <class MapPoint>
 TriangleMesh make_cube_lattice(int s, MapPoint map_point) {
-  if (s < 1) throw std::invalid_argument("subdivisions must be >= 1");
+  if (s < 1 || s > kMaxSubdivisions) {
+    throw std::invalid_argument("subdivisions must be in [1, " + std::to_string(kMaxSubdivisions) + "], got " +
+                                std::to_string(s));
+  }
   TriangleMesh mesh;
   std::map<std::array<int, 3>, int> index_of;  // lattice coordinate in [0, s]^3 -> vertex
   std::vector<Vec3> vertices;

@@ -18,9 +18,13 @@ struct TriangleMesh {
 // A vertex used by no triangle (or only degenerate ones) gets +y.
 Points vertex_normals(const TriangleMesh& mesh);
 
+// The most subdivisions a sphere or box mesh takes: 12 * 512^2 = 3.1 million triangles (about
+// 250 MB while it is built); more is std::invalid_argument, before anything is allocated.
+constexpr int kMaxSubdivisions = 512;
+
 // Sphere of the given radius centred at the origin: a cube whose faces are split into
 // subdivisions x subdivisions quads (two triangles each), every vertex projected onto the
-// sphere. 6 * s^2 + 2 vertices, 12 * s^2 triangles.
+// sphere. 6 * s^2 + 2 vertices, 12 * s^2 triangles; s in [1, kMaxSubdivisions].
 TriangleMesh make_sphere_mesh(double radius, int subdivisions);
 
 // Axis-aligned box with the given full edge lengths, centred at the origin, each face split

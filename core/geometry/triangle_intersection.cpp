@@ -7,6 +7,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
 #include <tuple>
 
 namespace simbake {
@@ -25,6 +28,22 @@ struct CellRange {
 };
 
 constexpr long long kMaxCells = 512;
+
+// The pairs the search below would test: each cell's pairs, and each large triangle against
+// every other; std::length_error when they are more than max_tests (nothing tested yet)
+void check_test_count(const std::vector<size_t>& group_starts, long long large, long long m, long long max_tests) {
+  long double tests = static_cast<long double>(large) * static_cast<long double>(m);
+  for (size_t k = 0; k + 1 < group_starts.size(); ++k) {
+    const long double n = static_cast<long double>(group_starts[k + 1] - group_starts[k]);
+    tests += 0.5L * n * (n - 1.0L);
+  }
+  if (tests > static_cast<long double>(max_tests)) {
+    char shown[96];
+    std::snprintf(shown, sizeof shown, "%.3Lg candidate pairs, more than the budget of %lld", tests, max_tests);
+    throw std::length_error(std::string("intersecting_triangle_pairs: ") + shown +
+                            " (triangles crowded into one place, or far larger than their mean edge)");
+  }
+}
 constexpr double kRoundOff = 1e-10;  // signed volumes under this x L^3 are zero (L: the longest edge)
 
 }  // namespace
@@ -46,7 +65,7 @@ bool triangles_intersect(const Vec3& a0, const Vec3& a1, const Vec3& a2,
          segment_crosses_triangle(b1, b2, a0, a1, a2, eps) || segment_crosses_triangle(b2, b0, a0, a1, a2, eps);
 }
 
-std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Points& x, const Triangles& t) {
+std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Points& x, const Triangles& t, long long max_tests) {
   const int m = static_cast<int>(t.rows());
   std::vector<std::pair<int, int>> pairs;
   if (m < 2) return pairs;
@@ -92,6 +111,7 @@ std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Points& x, co
     if (e == 0 || std::get<0>(entries[e]) != std::get<0>(entries[e - 1])) group_starts.push_back(e);
   }
   group_starts.push_back(entries.size());
+  if (max_tests != kNoPairTestLimit) check_test_count(group_starts, static_cast<long long>(large.size()), m, max_tests);
 
   const auto share_vertex = [&t](int i, int j) {
     for (int a = 0; a < 3; ++a)

@@ -33,7 +33,17 @@ bool segment_crosses_triangle(const Vec3& p, const Vec3& q, const Vec3& a, const
 bool triangles_intersect(const Vec3& a0, const Vec3& a1, const Vec3& a2,
                          const Vec3& b0, const Vec3& b1, const Vec3& b2);
 
-// Every pair (i, j), i < j, of triangles that share no vertex and intersect, sorted
-std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Points& vertices, const Triangles& triangles);
+// Candidate pairs one call may test when asked to bound its work: about 10 s on one core.
+constexpr long long kPairTestBudget = 200'000'000;
+constexpr long long kNoPairTestLimit = -1;
+
+// Every pair (i, j), i < j, of triangles that share no vertex and intersect, sorted.
+// Work is bounded by `max_tests` (kNoPairTestLimit: unbounded): the candidate pairs (pairs in
+// one grid cell, and each triangle too large for the grid against every other) are counted
+// before any is tested, and more than max_tests is std::length_error. Crumpled or random
+// triangles put many in one cell (100,000 random triangles in a unit cube: ~1e10 candidates),
+// where the answer itself can be quadratic in the triangle count.
+std::vector<std::pair<int, int>> intersecting_triangle_pairs(const Points& vertices, const Triangles& triangles,
+                                                             long long max_tests = kNoPairTestLimit);
 
 }  // namespace simbake

@@ -59,7 +59,9 @@ class BodyAsset:
 
 
 def cache_dir() -> Path:
-    if "SIMBAKE_CACHE_DIR" in os.environ:
+    """$SIMBAKE_CACHE_DIR, else $XDG_CACHE_HOME/simbake or ~/.cache/simbake (an empty variable
+    counts as unset: it must not mean the current directory)."""
+    if os.environ.get("SIMBAKE_CACHE_DIR"):
         return Path(os.environ["SIMBAKE_CACHE_DIR"])
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "simbake"
@@ -83,7 +85,10 @@ def read_triangles(path: Path, file: str | Path, key: str, process: bool):
     except SceneError:
         raise
     except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
-        if isinstance(error, ImportError):  # a format whose optional reader is not installed
+        if isinstance(error, ImportError) and error.name in ("charset_normalizer", "chardet"):
+            # trimesh guesses the encoding of a text format that is not UTF-8 with these
+            detail = f"not UTF-8 text ({path.suffix or 'this'} files are text; is it binary or damaged?)"
+        elif isinstance(error, ImportError):  # a format whose optional reader is not installed
             detail = f"no reader for {path.suffix or 'such'} files in this installation ({error})"
         else:
             detail = str(error).splitlines()[0] if str(error) else type(error).__name__
@@ -182,8 +187,12 @@ def needs_level_set(scene: Scene, index: int) -> bool:
 
 
 def check_voxel_count(vertices: np.ndarray, voxel_size: float, file: str | Path, key: str) -> None:
-    """Refuse a grid that would not fit: the interior is filled, so voxels grow as 1/h^3."""
+    """Refuse a grid that would not fit (the interior is filled, so voxels grow as 1/h^3), or
+    whose voxels are larger than the mesh itself (it would describe nothing of its shape)."""
     extent = vertices.max(axis=0) - vertices.min(axis=0)
+    if voxel_size > float(extent.max()):
+        raise SceneError(file, key, f"voxel size {voxel_size:g} m is larger than the mesh ({float(extent.max()):g} m "
+                                    "across); a level set needs voxels smaller than the shape it describes")
     voxels = float(np.prod(extent / voxel_size + 6.0))
     if voxels > MAX_VOXELS:
         raise SceneError(file, key, f"voxel size {voxel_size:g} m needs ~{voxels:.2g} voxels for this mesh "

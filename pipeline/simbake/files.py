@@ -22,16 +22,20 @@ previews, reports) goes through here:
 from __future__ import annotations
 
 import errno
+import hashlib
 import os
 import re
 import secrets
+import shutil
 import stat
 from pathlib import Path
 from typing import Callable, Iterable
 
 from .errors import OutputError, SceneError
 
-_TEMP = re.compile(r"\.(?P<name>.+)\.(?P<pid>\d+)-[0-9A-Za-z-]+\.tmp(\.[0-9A-Za-z]+)?")
+# a temp file or folder (".tmp", ".tmp.usdc"), or an earlier output moved aside while a
+# bake's outputs were being swapped in (".old")
+_TEMP = re.compile(r"\.(?P<name>.+)\.(?P<pid>\d+)-[0-9A-Za-z-]+\.(?:tmp(\.[0-9A-Za-z]+)?|(?P<old>old))")
 
 
 def temp_path(path: Path, suffix: str | None = None) -> Path:
@@ -54,7 +58,9 @@ def _alive(pid: int) -> bool:
 
 
 def remove_stale_temps(path: Path) -> list[Path]:
-    """Remove temp files of `path` left by processes that are gone; returns what was removed."""
+    """Remove temps of `path` (files or folders) left by processes that are gone; returns what
+    was removed. An earlier output that a killed bake had moved aside (``.old``) is put back
+    when nothing took its place, else removed."""
     path = Path(path)
     removed = []
     try:
@@ -66,11 +72,26 @@ def remove_stale_temps(path: Path) -> list[Path]:
         if not match or match["name"] != path.name or _alive(int(match["pid"])):
             continue
         try:
-            os.remove(entry.path)
+            if match["old"] and not os.path.lexists(path):
+                os.rename(entry.path, path)
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                os.remove(entry.path)
             removed.append(Path(entry.path))
         except OSError:
             pass
     return removed
+
+
+def sha256_of(path: Path) -> str:
+    """The SHA-256 (hex) of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 20):
+            digest.update(chunk)
+    return digest.hexdigest()
 
 
 def remove_if_present(path: Path) -> None:
@@ -80,7 +101,8 @@ def remove_if_present(path: Path) -> None:
         pass
 
 
-def _fsync(path: Path, directory: bool = False) -> None:
+def fsync_path(path: Path, directory: bool = False) -> None:
+    """Flush a file (or a folder's entries) to disk; folders that cannot be flushed pass."""
     fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
     try:
         os.fsync(fd)
@@ -105,12 +127,12 @@ def describe(error: BaseException) -> str:
 def commit(tmp: Path, path: Path) -> None:
     """Flush the finished temp file to disk and rename it onto `path` (atomic, same
     directory); the file gets the permissions of any new file (0666 less the umask)."""
-    _fsync(tmp)
+    fsync_path(tmp)
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)
     os.replace(tmp, path)
-    _fsync(path.parent, directory=True)
+    fsync_path(path.parent, directory=True)
 
 
 def write_atomically(path: Path, write: Callable[[str], None],
@@ -127,7 +149,7 @@ def write_atomically(path: Path, write: Callable[[str], None],
     try:
         write(str(tmp))
         if verify is not None:
-            _fsync(tmp)
+            fsync_path(tmp)
             verify(str(tmp))
         commit(tmp, path)
     except OSError as error:
@@ -154,17 +176,51 @@ def check_input_file(path: Path, file: str | Path, key: str) -> None:
         raise SceneError(file, key, f"cannot read {path}: permission denied")
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def _resolved(path: Path) -> str:
+    """The path as the OS would walk it: absolute, '..' and symlinks resolved."""
+    return os.path.realpath(os.path.abspath(path))
+
+
+def _identity(path: Path):
     try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.abspath(a) == os.path.abspath(b)
+        info = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return info.st_dev, info.st_ino
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file: by identity when both exist (a hard link, a symlink),
+    else by normalised, resolved path (``sub/../c.usdc``)."""
+    ia, ib = _identity(a), _identity(b)
+    if ia is not None and ib is not None:
+        return ia == ib
+    return _resolved(a) == _resolved(b)
+
+
+def inside(path: Path, folder: Path) -> bool:
+    """Whether `path` lies within `folder`: by resolved path, or one of its resolved parents
+    is `folder` itself (by identity)."""
+    resolved, top = _resolved(path), _resolved(folder)
+    if resolved != top and os.path.commonpath([resolved, top]) == top:
+        return True
+    target = _identity(folder)
+    return target is not None and any(_identity(parent) == target for parent in Path(resolved).parents)
+
+
+def check_output_name(path: Path) -> None:
+    """A name USD and every shell can hold: no newline or other control character."""
+    if any(not c.isprintable() for c in str(path)):
+        shown = "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in str(path))
+        raise SceneError(shown, "", "an output name with a newline or another control character; give "
+                                    "another output name")
 
 
 def check_output_path(path: Path, suffixes: tuple[str, ...], inputs: Iterable[Path] = ()) -> None:
     """Reject an output path before any work is done: wrong suffix, missing or unwritable
     directory, a directory, or any of `inputs` (the files the command reads)."""
     path = Path(path)
+    check_output_name(path)
     if path.suffix.lower() not in suffixes:
         raise SceneError(path, "", f"output must end in {', '.join(suffixes)}")
     try:
@@ -177,7 +233,7 @@ def check_output_path(path: Path, suffixes: tuple[str, ...], inputs: Iterable[Pa
     if is_dir:
         raise SceneError(path, "", "is a directory; give a file name")
     for source in inputs:
-        if source is not None and _same_file(path, Path(source)):
+        if source is not None and same_file(path, Path(source)):
             raise SceneError(path, "", f"would write over the input {source}; give another output (-o)")
     probe = temp_path(path, ".probe")
     try:

@@ -42,13 +42,15 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from .errors import SceneError
-from .files import check_output_path, write_atomically
+from .files import check_input_file, check_output_path, write_atomically
 
 OUTPUT_SUFFIXES = (".png", ".mp4", ".gif")
 SHEET_FRAMES = 8                 # frames on a contact sheet when --frames is not given
 SHEET_SIZE = (480, 270)          # a contact sheet's tiles (pixels)
 MOVIE_SIZE = (960, 540)          # a movie's frames (pixels)
 MAX_PIXELS = 4096 * 4096         # largest frame (llvmpipe's framebuffer limit is 8192 a side)
+MAX_FRAMES = 10_000              # frames one preview draws (7 minutes at 24 fps; ~20 minutes
+                                 # of rendering at 960x540)
 MSAA_SAMPLES = 4
 FOV_Y = math.radians(35.0)       # the automatic camera's vertical field of view
 VIEW_DIRECTION = np.array([0.55, 0.62, 1.0])  # automatic camera: from front right, 28 degrees
@@ -81,13 +83,15 @@ def parse_size(text: str, key: str = "--size") -> tuple[int, int]:
 
 def parse_frames(text: str | None, start: int, end: int, default_count: int | None) -> list[int]:
     """'A:B[:STEP]' (inclusive, either end may be left out) or 'A' -> frame numbers within
-    [start, end]; None -> every frame, or `default_count` evenly spaced ones."""
+    [start, end]; None -> every frame, or `default_count` evenly spaced ones. At most
+    MAX_FRAMES frames (a render of a 1e7-frame stage would never end): more is an error
+    naming --frames."""
     if text is None:
-        frames = list(range(start, end + 1))
-        if default_count is not None and len(frames) > default_count:
-            picks = np.linspace(0, len(frames) - 1, default_count).round().astype(int)
-            frames = [frames[k] for k in sorted(set(picks.tolist()))]
-        return frames
+        count = end - start + 1
+        if default_count is not None and count > default_count:
+            picks = np.linspace(0, count - 1, default_count).round().astype(np.int64)
+            return [start + int(k) for k in sorted(set(picks.tolist()))]
+        return _within_budget(range(start, end + 1), f"{start}:{end}")
     parts = text.split(":")
     try:
         if len(parts) == 1:
@@ -105,7 +109,14 @@ def parse_frames(text: str | None, start: int, end: int, default_count: int | No
         raise SceneError(text, "--frames", f"STEP must be >= 1, got {step}")
     if a > b or a < start or b > end:
         raise SceneError(text, "--frames", f"must lie within the cache's frames {start}:{end}, in order")
-    return list(range(a, b + 1, step))
+    return _within_budget(range(a, b + 1, step), text)
+
+
+def _within_budget(frames: range, text: str) -> list[int]:
+    if len(frames) > MAX_FRAMES:
+        raise SceneError(text, "--frames", f"{len(frames):,} frames is more than a preview draws (at most "
+                                           f"{MAX_FRAMES:,}); give a shorter range or a STEP (A:B:STEP)")
+    return list(frames)
 
 
 # --------------------------------------------------------------------------------------------
@@ -779,8 +790,7 @@ class Preview:
         from pxr import Usd
 
         self.cache = Path(cache)
-        if not self.cache.is_file():
-            raise SceneError(cache, "", "no such file")
+        check_input_file(self.cache, cache, "")
         try:
             stage = Usd.Stage.Open(str(self.cache))
         except Exception as error:
@@ -843,8 +853,11 @@ class Preview:
 
 
 def contact_sheet(images: Sequence[np.ndarray], columns: int | None = None, gap: int = 4) -> np.ndarray:
-    """Frames in a grid, left to right and top to bottom, on white."""
+    """Frames in a grid, left to right and top to bottom, on white; one frame alone is just
+    that frame (exactly the size asked for)."""
     n = len(images)
+    if n == 1:
+        return images[0]
     columns = columns or min(n, 4)
     rows = math.ceil(n / columns)
     h, w = images[0].shape[:2]

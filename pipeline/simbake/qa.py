@@ -17,22 +17,30 @@ Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
   thickness (5 mm by default) away from surfaces, so anything past the surface is a miss.
 * ``cloth_strain``: the cloth's ``strain_limit`` plus 1% of it (no threshold when 0).
 * ``cloth_self_intersections``: 0 crossing pairs of triangles (a layer through another).
-* ``substeps``: a frame that needed the solver's cap (``max_substeps``, 4096).
+* ``substeps``: a frame whose automatic substeps reached the solver's cap (``max_substeps``,
+  4096); none when the scene fixes its substeps (its own choice, up to that cap).
+* ``energy_gain``, ``unexplained_stop``, ``imparted_speed``: energy made up by the solver, a
+  body stopping in mid-air, a body launched faster than anything but a keyed body could make
+  it (simbake.qa_motion, where each is defined with its threshold).
 
 The JSON layout (version 1)::
 
-    {"simbake_qa": 1, "cache": ..., "scene": {...}, "thresholds": {...},
+    {"simbake_qa": 2, "cache": ..., "cache_sha256": ..., "scene": {...}, "thresholds": {...},
      "frames": [...], "time": [...],            # frame numbers, seconds from the start
      "figures": {"substeps": [...], "wall_seconds": [...], "kinetic_energy": [...],
                  "body_penetration": [...], "body_penetration_between": [[a, b] | null],
                  "cloth_penetration": [...], "cloth_strain": [...],
-                 "cloth_self_intersections": [...]},
+                 "cloth_self_intersections": [...], "energy_gain": [...],
+                 "unexplained_stop": [...], "unexplained_stop_body": [name | null],
+                 "imparted_speed": [...], "imparted_speed_body": [name | null]},
      "cloths": {name: {"strain": [...], "self_intersections": [...],
                        "vertex_penetration": [...], "edge_penetration": [...]}},
      "summary": {figure: {"worst": v, "frame": f, "threshold": t, "first_over": f | null}},
      "warnings": [...], "profile": {stage: seconds}}
 
-Lengths are metres, energies joules, times seconds.
+Lengths are metres, energies joules, speeds metres per second, times seconds.
+``cache_sha256`` is the SHA-256 of the cache file the sidecar was written with: ``simbake
+report`` uses a sidecar only beside that very file.
 """
 
 from __future__ import annotations
@@ -43,14 +51,18 @@ import math
 from pathlib import Path
 from typing import Any
 
-from .files import write_atomically
+from .files import sha256_of, write_atomically
+from .qa_motion import MotionFigures
 from .scene import Scene
 
-QA_VERSION = 1
+QA_VERSION = 2
 BODY_PENETRATION = 5e-3       # (m)
 CLOTH_PENETRATION = 1e-3      # (m)
 STRAIN_MARGIN = 0.01          # of the strain limit
 MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
+
+
+_MOTION = ("energy_gain", "unexplained_stop", "unexplained_stop_body", "imparted_speed", "imparted_speed_body")
 
 
 def qa_path(cache: str | Path) -> Path:
@@ -68,7 +80,7 @@ def thresholds(scene: Scene) -> dict[str, float | None]:
         # per cloth (its own limit); this is the largest, for the summary
         "cloth_strain": max(limits) * (1 + STRAIN_MARGIN) if limits else None,
         "cloth_self_intersections": 0 if scene.cloths else None,
-        "substeps": MAX_SUBSTEPS - 1,
+        "substeps": MAX_SUBSTEPS - 1 if scene.substeps == 0 else None,  # a fixed count is the scene's
         "kinetic_energy": None,
         "wall_seconds": None,
     }
@@ -77,30 +89,38 @@ def thresholds(scene: Scene) -> dict[str, float | None]:
 class QualityRecorder:
     """Collects the quality figures of every written frame of one bake."""
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, motion: MotionFigures | None = None):
         self.scene = scene
+        self.motion = motion
         self.body_names = [b.name for b in scene.bodies]
         self.cloth_names = [c.name for c in scene.cloths]
         self.limits = {c.name: (c.strain_limit * (1 + STRAIN_MARGIN) if c.strain_limit > 0 else None)
                        for c in scene.cloths}
-        self.thresholds = thresholds(scene)
         self.frames: list[int] = []
         self.figures: dict[str, list] = {k: [] for k in (
             "substeps", "wall_seconds", "kinetic_energy", "body_penetration",
             "body_penetration_between", "cloth_penetration", "cloth_strain",
-            "cloth_self_intersections")}
+            "cloth_self_intersections") + (_MOTION if motion is not None else ())}
         self.cloths: dict[str, dict[str, list]] = {
             name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
                    "edge_penetration": []} for name in self.cloth_names}
 
-    def record(self, frame: int, world, substeps: int, wall_seconds: float) -> None:
-        """The figures of `world` as it is now, written as `frame`."""
+    @property
+    def thresholds(self) -> dict[str, float | None]:
+        """Each figure's threshold (the energy's depends on the whole bake: known at the end)."""
+        return {**thresholds(self.scene), **(self.motion.thresholds() if self.motion is not None else {})}
+
+    def record(self, frame: int, world, substeps: int, wall_seconds: float, origins=None) -> None:
+        """The figures of `world` as it is now, written as `frame`; `origins` (bodies, 3): the
+        bodies' mesh origins (m), for the motion figures."""
         quality = world.quality()
         self.frames.append(frame)
         f = self.figures
         f["substeps"].append(int(substeps))
         f["wall_seconds"].append(float(wall_seconds))
         f["kinetic_energy"].append(float(world.statistics()["kinetic_energy"]))
+        if self.motion is not None:
+            self._record_motion(frame, world, origins, quality["body_penetration"][0] > BODY_PENETRATION)
         depth, a, b = quality["body_penetration"]
         f["body_penetration"].append(float(depth))
         f["body_penetration_between"].append(
@@ -118,6 +138,18 @@ class QualityRecorder:
         f["cloth_penetration"].append(deepest)
         f["cloth_strain"].append(strain)
         f["cloth_self_intersections"].append(crossings)
+
+    def _record_motion(self, frame: int, world, origins, overlapping: bool) -> None:
+        time = (frame - self.scene.start_frame) / self.scene.fps
+        m = self.motion.record(world, time, origins, overlapping)
+        f = self.figures
+        if len(self.frames) == 1:  # before any step the core has no statistics yet
+            f["kinetic_energy"][-1] = self.motion.largest_kinetic
+        for name, who in (("energy_gain", None), ("unexplained_stop", "stopped_body"),
+                          ("imparted_speed", "fastest_body")):
+            f[name].append(float(m[name]))
+            if who is not None:
+                f[f"{name}_body"].append(self.body_names[m[who]] if m[who] >= 0 and m[name] > 0 else None)
 
     # -- results -------------------------------------------------------------------------------
 
@@ -170,8 +202,20 @@ class QualityRecorder:
             over(f"cloth {name!r} penetration", depth, CLOTH_PENETRATION, "mm", 1e3)
             over(f"cloth {name!r} strain", c["strain"], self.limits[name], "%", 1e2)
             over(f"cloth {name!r} self-intersections", c["self_intersections"], 0, "pairs", 1)
-        over("substeps", self.figures["substeps"], self.thresholds["substeps"], "", 1)
+        over("substeps at the solver's cap", self.figures["substeps"], self.thresholds["substeps"], "", 1)
+        if self.motion is not None:
+            self._motion_warnings(over)
         return lines
+
+    def _motion_warnings(self, over) -> None:
+        f, t = self.figures, self.thresholds
+        over("energy gained without a source (the solver made it up: check inertia, add substeps)",
+             f["energy_gain"], t["energy_gain"], "J", 1)
+        stopped, fastest = f["unexplained_stop_body"], f["imparted_speed_body"]
+        over("a body stopped in mid-air, clear of everything (add substeps)", f["unexplained_stop"],
+             t["unexplained_stop"], "m/s", 1, lambda k: f" ({stopped[k]})" if stopped[k] else "")
+        over("speed beyond what the start and gravity give (a keyed body launched it: check its keys)",
+             f["imparted_speed"], t["imparted_speed"], "m/s", 1, lambda k: f" ({fastest[k]})" if fastest[k] else "")
 
     def layer_summary(self) -> dict[str, Any]:
         """What goes into the cache's customLayerData["simbake"]["qa"]: worst values and frames."""
@@ -186,11 +230,12 @@ class QualityRecorder:
         out["warnings"] = sum(1 for s in summary.values() if s["first_over"] is not None)
         return out
 
-    def as_dict(self, cache: Path, profile: dict[str, float]) -> dict[str, Any]:
+    def as_dict(self, cache: Path, profile: dict[str, float], cache_sha256: str = "") -> dict[str, Any]:
         sidecar = qa_path(cache)
         return {
             "simbake_qa": QA_VERSION,
             "cache": cache.name,
+            "cache_sha256": cache_sha256,
             "scene": {"path": str(self.scene.path), "sha256": self.scene.hash(),
                       "settings": _plain(dataclasses.asdict(self.scene))},
             "thresholds": self.thresholds,
@@ -203,11 +248,21 @@ class QualityRecorder:
             "profile": dict(profile),
         }
 
-    def write(self, cache: Path, profile: dict[str, float]) -> Path:
-        """Writes the sidecar beside the cache (whole or not at all); returns its path."""
+    def write(self, cache: Path, profile: dict[str, float], outputs=None) -> Path:
+        """Writes the sidecar beside the cache (whole or not at all); returns its path. With
+        `outputs` (simbake.outputs.Outputs, where the cache is staged) it is staged there too."""
         path = qa_path(cache)
-        text = json.dumps(self.as_dict(cache, profile), indent=1, allow_nan=False)
-        write_atomically(path, lambda tmp: Path(tmp).write_text(text + "\n"))
+        staged = outputs.staged(cache) if outputs is not None else None
+        digest = sha256_of(staged if staged is not None else cache)
+        text = json.dumps(self.as_dict(cache, profile, digest), indent=1, allow_nan=False)
+
+        def write(tmp: str) -> None:
+            Path(tmp).write_text(text + "\n")
+
+        if outputs is not None:
+            outputs.write(path, write)
+        else:
+            write_atomically(path, write)
         return path
 
 

@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from .errors import SceneError
-from .files import check_output_path, write_atomically
-from .qa import BODY_PENETRATION, CLOTH_PENETRATION, STRAIN_MARGIN, qa_path
+from .files import check_input_file, check_output_path, describe, sha256_of, write_atomically
+from .qa import BODY_PENETRATION, CLOTH_PENETRATION, QA_VERSION, STRAIN_MARGIN, qa_path
 
 OUTPUT_SUFFIXES = (".html", ".png")
 STRIP_FRAMES = 6
@@ -35,18 +35,80 @@ def report_path(cache: str | Path) -> Path:
 
 
 def _load(cache: Path) -> dict[str, Any]:
-    if not cache.is_file():
-        raise SceneError(cache, "", "no such file")
+    """The QA data beside `cache`: a sidecar simbake wrote for this very cache (its SHA-256
+    matches), of the shape simbake writes; else a one-line SceneError."""
+    check_input_file(cache, cache, "")
     sidecar = qa_path(cache)
     if not sidecar.is_file():
         raise SceneError(cache, "", f"no QA data beside it ({sidecar.name} is missing; bake it again to make one)")
     try:
         data = json.loads(sidecar.read_text())
     except (OSError, ValueError) as error:
-        raise SceneError(sidecar, "", f"cannot read the QA data: {error}") from None
-    if data.get("simbake_qa") != 1:
-        raise SceneError(sidecar, "simbake_qa", f"unknown QA data version {data.get('simbake_qa')!r}")
+        raise SceneError(sidecar, "", f"cannot read the QA data: {describe(error)}") from None
+    if not isinstance(data, dict) or data.get("simbake_qa") != QA_VERSION:
+        version = data.get("simbake_qa") if isinstance(data, dict) else None
+        raise SceneError(sidecar, "simbake_qa", f"unknown QA data version {version!r} (this simbake reads "
+                                                f"{QA_VERSION}; bake again to make one)")
+    _expect(data, SIDECAR, "", sidecar)
+    frames = len(data["frames"])
+    for group, series in [("figures", data["figures"])] + [(f"cloths.{n}", c) for n, c in data["cloths"].items()]:
+        for name, values in series.items():
+            if isinstance(values, list) and len(values) != frames:
+                raise SceneError(sidecar, f"{group}.{name}", f"has {len(values)} values for {frames} frames")
+    if sha256_of(cache) != data["cache_sha256"]:
+        raise SceneError(sidecar, "cache_sha256", f"is the QA data of another cache, not of {cache.name} "
+                                                  "(the cache was replaced or edited since); bake it again")
     return data
+
+
+# The sidecar's shape, as far as the report reads it (simbake.qa writes it): a type, NUMBER,
+# [schema] (a list of), {key: schema} (a table; "*" for any key), or a tuple of alternatives
+NUMBER = "number"
+_SERIES = [(NUMBER, type(None))]
+SIDECAR = {
+    "cache_sha256": str, "frames": [int], "warnings": [str], "profile": {"*": NUMBER},
+    "figures": {name: _SERIES for name in ("body_penetration", "cloth_penetration", "kinetic_energy",
+                                           "substeps", "wall_seconds")},
+    "cloths": {"*": {"strain": _SERIES, "self_intersections": _SERIES}},
+    "summary": {"*": {"worst": NUMBER, "frame": int, "threshold": (NUMBER, type(None)),
+                      "first_over": (int, type(None))}},
+    "scene": {"sha256": str, "settings": {
+        "path": str, "start_frame": int, "end_frame": int, "fps": NUMBER, "gravity": [NUMBER], "substeps": int,
+        "ground": (type(None), {"height": NUMBER, "friction": NUMBER, "restitution": NUMBER}),
+        "bodies": [{"shape": {"kind": str}, "kinematic": bool}],
+        "cloths": [{"name": str, "grid_resolution": (type(None), [int]), "mesh_path": (type(None), str),
+                    "model": str, "stretch_stiffness": NUMBER, "strain_limit": NUMBER, "thickness": NUMBER,
+                    "pinned": [int]}]}},
+}
+
+
+def _expect(value, schema, key: str, sidecar: Path) -> None:
+    """Refuse a value of the wrong shape, naming its key in the sidecar."""
+    if isinstance(schema, tuple):
+        for alternative in schema:
+            try:
+                return _expect(value, alternative, key, sidecar)
+            except SceneError:
+                pass
+        raise SceneError(sidecar, key, "has the wrong type (not a QA sidecar simbake wrote; bake again)")
+    if schema == NUMBER:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    elif isinstance(schema, type):
+        ok = isinstance(value, schema) and (schema is bool or not isinstance(value, bool))
+    else:
+        ok = isinstance(value, list if isinstance(schema, list) else dict)
+    if not ok:
+        raise SceneError(sidecar, key or "(top)", "has the wrong type (not a QA sidecar simbake wrote; bake again)")
+    if isinstance(schema, list):
+        for k, item in enumerate(value):
+            _expect(item, schema[0], f"{key}[{k}]", sidecar)
+    elif isinstance(schema, dict):
+        for name, inner in schema.items():
+            names = [n for n in value if isinstance(n, str)] if name == "*" else [name]
+            for n in names:
+                if n not in value:
+                    raise SceneError(sidecar, f"{key}.{n}".lstrip("."), "is missing (not a QA sidecar simbake wrote; bake again)")
+                _expect(value[n], inner, f"{key}.{n}".lstrip("."), sidecar)
 
 
 def _settings_lines(qa: dict[str, Any]) -> list[str]:

@@ -186,6 +186,11 @@ class Scene:
             digest.update(_file_digest(path))
         return digest.hexdigest()
 
+    def source_key(self, key: str) -> str:
+        """Where a scene key was read from, for messages: the key itself for a TOML scene, the
+        prim and attribute for a USD shot (``/World/Box.size`` for ``bodies[0].shape.size[1]``)."""
+        return self.shot.usd_key(key) if self.shot is not None else key
+
     def input_files(self) -> tuple[Path, ...]:
         """Every file a bake of this scene reads: the scene file (a USD shot: every layer its
         stage used, in sorted order), then its meshes."""

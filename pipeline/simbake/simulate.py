@@ -7,8 +7,6 @@ streams them to disk. A non-finite state stops the bake with SimulationError and
 
 from __future__ import annotations
 
-import os
-import secrets
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,9 +18,11 @@ from . import _core, __version__
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
-from .limits import check_budget, check_scene
+from .outputs import Outputs, check_outputs
+from .limits import check_budget, check_memory_in_flight, check_scene, crowding
 from .normals import corner_normals
 from .qa import QualityRecorder, qa_path
+from .qa_motion import MotionFigures, bounding_radius, lumped_masses, mean_edge
 from .scene import Scene
 from .usd_instancer import quaternion_rate
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
@@ -50,6 +50,11 @@ class BakeStats:
                 f"max penetration {self.max_penetration * 1000:.3f} mm -> {self.output}")
 
 
+def body_mass(body, asset: BodyAsset) -> float:
+    """A body's mass (kg): given, or its density times its shape's volume."""
+    return body.mass if body.mass is not None else body.density * asset.mass_properties["volume"]
+
+
 def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] = (),
                 **settings) -> "_core.World":
     """The core World for the scene; `settings` go to _core.World (max_substep, threads, ...)."""
@@ -58,8 +63,7 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
         world.set_ground(height=scene.ground.height, friction=scene.ground.friction,
                          restitution=scene.ground.restitution)
     for index, (body, asset) in enumerate(zip(scene.bodies, assets)):
-        volume = asset.mass_properties["volume"]
-        mass = body.mass if body.mass is not None else body.density * volume
+        mass = body_mass(body, asset)
         # a mesh body's level set comes with its mesh: its sharp edges are held out of cloth
         mesh = ({"mesh_vertices": asset.vertices, "mesh_triangles": asset.triangles}
                 if body.shape.kind == "mesh" and asset.level_set is not None else {})
@@ -71,7 +75,7 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
                            angular_velocity=np.array(body.angular_velocity), friction=body.friction,
                            restitution=body.restitution, kinematic=body.kinematic, **mesh)
         except ValueError as error:
-            raise SceneError(scene.source, f"bodies[{index}]", str(error)) from None
+            raise SceneError(scene.source, scene.source_key(f"bodies[{index}]"), str(error)) from None
         if body.keys:
             world.set_kinematic_track(index, [k.time for k in body.keys],
                                       np.array([k.position for k in body.keys]),
@@ -86,7 +90,7 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
                             integrator=cloth.integrator, friction=cloth.friction, thickness=cloth.thickness,
                             self_collision=cloth.self_collision)
         except ValueError as error:
-            raise SceneError(scene.source, f"cloths[{index}]", str(error)) from None
+            raise SceneError(scene.source, scene.source_key(f"cloths[{index}]"), str(error)) from None
     return world
 
 
@@ -193,21 +197,33 @@ def instancer_groups(scene: Scene, instancing: str = "auto") -> list[InstancerGr
     return groups
 
 
-def _level_set_files(scene: Scene, assets, output: Path, groups) -> tuple[dict, Path | None]:
-    """The baked .vdb of each (non-instanced) mesh body, copied into a temporary folder beside
-    the output (renamed to OUTPUT_STEM.vdb/ with it): body index -> its final path."""
+def _level_set_bodies(scene: Scene, groups) -> list[int]:
+    """Bodies whose baked .vdb a bake copies beside the cache: the mesh bodies, not drawn by a
+    PointInstancer, that something can touch (simbake.assets.needs_level_set)."""
+    from .assets import needs_level_set
+
+    instanced = {i for g in groups for i in g.bodies}
+    return [i for i, b in enumerate(scene.bodies)
+            if i not in instanced and b.shape.kind == "mesh" and needs_level_set(scene, i)]
+
+
+def level_set_folder(output: Path) -> Path:
+    return output.with_name(f"{output.stem}.vdb")
+
+
+def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Outputs) -> dict:
+    """The baked .vdb of each (non-instanced) mesh body, copied into a temp folder beside the
+    output (staged in `outputs` as OUTPUT_STEM.vdb/): body index -> its final path."""
     import shutil
 
     from .assets import level_set_cache_path
 
-    instanced = {i for g in groups for i in g.bodies}
-    wanted = [(i, b, a) for i, (b, a) in enumerate(zip(scene.bodies, assets))
-              if i not in instanced and a.level_set is not None and a.voxel_size > 0]
+    wanted = [(i, scene.bodies[i], assets[i]) for i in _level_set_bodies(scene, groups)
+              if assets[i].level_set is not None and assets[i].voxel_size > 0]
     if not wanted:
-        return {}, None
-    final = output.with_name(f"{output.stem}.vdb")
-    tmp = output.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
-    tmp.mkdir()
+        return {}
+    final = level_set_folder(output)
+    tmp = outputs.temp_dir(final)
     files: dict[int, Path] = {}
     written: dict[int, str] = {}  # id(level set) -> file name: copies of one mesh share a file
     for index, body, asset in wanted:
@@ -222,27 +238,12 @@ def _level_set_files(scene: Scene, assets, output: Path, groups) -> tuple[dict, 
                 asset.level_set.write(str(tmp / name))
             written[id(asset.level_set)] = name
         files[index] = final / name
-    return files, tmp
-
-
-def _move_level_sets(tmp: Path | None, output: Path) -> None:
-    """OUTPUT_STEM.vdb/ into place (an older one replaced); without level sets, none is left."""
-    import shutil
-
-    final = output.with_name(f"{output.stem}.vdb")
-    if tmp is None:
-        return
-    old = None
-    if final.exists():
-        old = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}.old")
-        os.replace(final, old)
-    os.replace(tmp, final)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+    outputs.stage(tmp, final)  # renamed into place with the cache
+    return files
 
 
 def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
-                  clips: int | None = None, level_sets: dict | None = None):
+                  clips: int | None = None, level_sets: dict | None = None, outputs: Outputs | None = None):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
     layer of overs for a USD shot (simbake.usd_layer)."""
     level_sets = level_sets or {}
@@ -251,10 +252,11 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
             from .usd_clips import ShotClipsWriter
 
             return ShotClipsWriter(output, scene, clip_frames=clips, provenance=_provenance(scene),
-                                   level_sets=level_sets)
+                                   level_sets=level_sets, outputs=outputs)
         from .usd_layer import ShotLayerWriter
 
-        return ShotLayerWriter(output, scene, provenance=_provenance(scene), level_sets=level_sets)
+        return ShotLayerWriter(output, scene, provenance=_provenance(scene), level_sets=level_sets,
+                               outputs=outputs)
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
@@ -270,7 +272,7 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
                    for cloth, asset in zip(scene.cloths, cloths)]
     settings = dict(fps=scene.fps, start_frame=scene.start_frame, end_frame=scene.end_frame,
                     bodies=prims, cloths=cloth_prims, provenance=_provenance(scene),
-                    instancers=instancer_groups(scene, instancing))
+                    instancers=instancer_groups(scene, instancing), outputs=outputs)
     if clips is not None:
         from .usd_clips import ClipsWriter
 
@@ -278,14 +280,21 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
     return CacheWriter(output, **settings)
 
 
-def _check_shot_outputs(scene: Scene, output: Path, shot: Path | None) -> None:
-    """--shot needs a USD shot, and its stage is neither the cache nor any input layer."""
-    if shot is not None:
-        if scene.shot is None:
-            raise SceneError(shot, "", "--shot needs a USD shot as input (.usd, .usda, .usdc)")
-        check_output_path(shot, USD_SUFFIXES, inputs=scene.input_files())
-        if shot.absolute() == output.absolute():
-            raise SceneError(shot, "", "--shot must differ from the cache (-o)")
+def _check_outputs(scene: Scene, output: Path, qa: bool, shot: Path | None, instancing: str,
+                   clips: int | None) -> None:
+    """Every output, and every folder the bake replaces, against every input and each other,
+    before any work (simbake.outputs)."""
+    if shot is not None and scene.shot is None:
+        raise SceneError(shot, "", "--shot needs a USD shot as input (.usd, .usda, .usdc)")
+    inputs = scene.input_files() + (scene.shot.dependencies if scene.shot is not None else ())
+    files = [(output, USD_SUFFIXES)] + ([(qa_path(output), (".json",))] if qa else []) \
+        + ([(shot, USD_SUFFIXES)] if shot is not None else [])
+    for path, suffixes in files:
+        check_output_path(path, suffixes, inputs=inputs)
+    groups = [] if scene.shot is not None else instancer_groups(scene, instancing)
+    folders = ([output.with_name(f"{output.stem}.clips")] if clips is not None else []) \
+        + ([level_set_folder(output)] if _level_set_bodies(scene, groups) else [])
+    check_outputs([path for path, _ in files], folders, inputs)
 
 
 def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profile: dict) -> float:
@@ -307,12 +316,16 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
                 raise SimulationError(f"{scene.source}: the state became non-finite at frame {frame}; "
                                       "nothing was written (try more [solver] substeps)")
             max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
+            check_memory_in_flight(scene, frame)
+        written = time.perf_counter()
+        stepping = written - frame_start
+        current = _frame_state(frame, world, cloth_count)
+        pipeline_profile["usd_writer"] += time.perf_counter() - written
         if recorder is not None:
             measured = time.perf_counter()
-            recorder.record(frame, world, substeps, measured - frame_start)
+            recorder.record(frame, world, substeps, stepping, current.translations)
             pipeline_profile["quality"] += time.perf_counter() - measured
         written = time.perf_counter()
-        current = _frame_state(frame, world, cloth_count)
         if pending is not None:  # the previous frame, its cloth velocities now known
             _write_frame(writer, pending, current, scene.fps, rates)
             if on_frame:
@@ -348,9 +361,6 @@ def bake(scene: Scene, output: str | Path, *,
     """
     output = Path(output)
     check_scene(scene)  # a Scene made in Python (or from USD) meets the same range as a file's
-    check_output_path(output, USD_SUFFIXES, inputs=scene.input_files())
-    if qa:
-        check_output_path(qa_path(output), (".json",), inputs=scene.input_files())
     instancer_groups(scene, instancing)  # a bad mode is an error before any work
     if clips is not None:
         if isinstance(clips, bool) or not isinstance(clips, int) or clips < 1:
@@ -358,14 +368,15 @@ def bake(scene: Scene, output: str | Path, *,
     if isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= MAX_THREADS:
         raise SceneError(scene.source, "--threads", f"must be a whole number in [0, {MAX_THREADS}], got {threads!r}")
     shot = Path(shot) if shot is not None else None
-    if scene.shot is not None or shot is not None:
-        _check_shot_outputs(scene, output, shot)
+    _check_outputs(scene, output, qa, shot, instancing, clips)
     start = time.perf_counter()
     assets = load_assets(scene)
     cloths = [load_cloth(scene, i) for i in range(len(scene.cloths))]
     world = build_world(scene, assets, cloths, threads=threads)
     check_budget(scene, output, scene.substeps or world.automatic_substeps(1.0 / scene.fps),
-                 sum(_moves(body) for body in scene.bodies), [len(c.vertices) for c in cloths])
+                 sum(_moves(body) for body in scene.bodies),
+                 [(len(a.vertices), crowding(c.thickness, mean_edge(a.vertices, a.triangles)))
+                  for c, a in zip(scene.cloths, cloths)])
     try:
         return _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, instancing, clips)
     except Exception as error:
@@ -379,34 +390,36 @@ def _write_failure(error: Exception) -> bool:
     return isinstance(error, OSError) or type(error).__name__ == "ErrorException"
 
 
+def _motion_figures(scene: Scene, assets, cloths) -> MotionFigures:
+    """The QA's motion figures (simbake.qa_motion) for these bodies and cloths."""
+    masses = [body_mass(b, a) for b, a in zip(scene.bodies, assets)]
+    return MotionFigures(scene, np.array(masses, dtype=np.float64).reshape(-1),
+                         np.array([bounding_radius(a.vertices) for a in assets]).reshape(-1),
+                         [lumped_masses(a.vertices, a.triangles, c.area_density) for c, a in zip(scene.cloths, cloths)])
+
+
 def _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, instancing, clips) -> BakeStats:
     total = scene.frame_count
-    recorder = QualityRecorder(scene) if qa else None
+    recorder = QualityRecorder(scene, _motion_figures(scene, assets, cloths)) if qa else None
     pipeline_profile = {"quality": 0.0, "usd_writer": 0.0}
     groups = [] if scene.shot is not None else instancer_groups(scene, instancing)  # TOML only
-    level_sets, level_set_tmp = _level_set_files(scene, assets, output, groups)
-    try:
-        with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets) as writer:
+    with Outputs() as outputs:  # everything staged, then swapped in together (or nothing)
+        level_sets = _level_set_files(scene, assets, output, groups, outputs)
+        with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets, outputs) as writer:
             max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile)
-    except BaseException:
-        if level_set_tmp is not None:
-            import shutil
+        if shot is not None:
+            from .usd_layer import write_shot_stage
 
-            shutil.rmtree(level_set_tmp, ignore_errors=True)
-        raise
-    _move_level_sets(level_set_tmp, output)
-    if shot is not None:
-        from .usd_layer import write_shot_stage
-
-        write_shot_stage(shot, output, scene.shot)
-    profile = {**world.profile(), **pipeline_profile}
-    sidecar, warnings = None, []
-    if recorder is not None:
-        summary = recorder.summary()
-        max_penetration = max(summary[k]["worst"] for k in ("body_penetration", "cloth_penetration")
-                              if k in summary)
-        sidecar = recorder.write(output, profile)
-        warnings = recorder.warnings(sidecar.name)
+            write_shot_stage(shot, output, scene.shot, outputs=outputs)
+        profile = {**world.profile(), **pipeline_profile}
+        sidecar, warnings = None, []
+        if recorder is not None:
+            summary = recorder.summary()
+            max_penetration = max(summary[k]["worst"] for k in ("body_penetration", "cloth_penetration")
+                                  if k in summary)
+            sidecar = recorder.write(output, profile, outputs=outputs)
+            warnings = recorder.warnings(sidecar.name)
+        outputs.commit()
     return BakeStats(output=output, frames=total, substeps=int(world.statistics()["substeps"]),
                      wall_seconds=time.perf_counter() - start, max_penetration=max_penetration,
                      profile=profile, qa=sidecar, warnings=warnings)

@@ -13,20 +13,20 @@ topology as a sublayer, and ``clips`` metadata on ``/World`` (``assetPaths``, ``
 ``times``: the identity, ``manifestAssetPath``, ``primPath``) that stitch the clips together. Opening it
 reads back the same values at every frame as a single-file cache. Each clip is written and
 closed before the next begins, so memory does not grow with the length of the shot. The
-clip folder is written beside under a temporary name and renamed into place with the output.
+clip folder is written beside under a temporary name and renamed into place with the output
+(and a bake's other outputs: simbake.outputs).
 """
 
 from __future__ import annotations
 
-import os
-import secrets
 import shutil
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from pxr import Sdf, UsdUtils, Vt
 
-from .usd_writer import CacheWriter, StreamingWriter, _merge, _to_usd
+from .outputs import Outputs, check_outputs
+from .usd_writer import CacheWriter, StreamingWriter, _merge, _to_usd, one_thread
 
 __all__ = ["ClipsWriter"]
 
@@ -36,7 +36,7 @@ class ClipsWriter(StreamingWriter):
 
     def __init__(self, path: str | Path, *, clip_frames: int, fps: float, start_frame: int,
                  end_frame: int, bodies: Sequence, cloths: Sequence = (),
-                 provenance: Mapping[str, Any] = {}, instancers: Sequence = ()):
+                 provenance: Mapping[str, Any] = {}, instancers: Sequence = (), outputs=None):
         if int(clip_frames) < 1:
             raise ValueError(f"clip_frames must be >= 1, got {clip_frames}")
         self.path = Path(path)
@@ -48,8 +48,11 @@ class ClipsWriter(StreamingWriter):
         self._provenance = dict(provenance)
         self._layer_data: dict = {}
         self.folder = self.path.with_name(f"{self.path.stem}.clips")
-        self._tmp = self.path.with_name(f".{self.folder.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
-        self._tmp.mkdir()
+        self._own_outputs = outputs is None  # alone (not one of a bake's outputs): commits itself
+        if self._own_outputs:
+            check_outputs([self.path], [self.folder], ())
+        self.outputs = Outputs() if outputs is None else outputs
+        self._tmp = self.outputs.temp_dir(self.folder)
         self._clips: list[tuple[str, int, int]] = []  # file name, first frame, last frame
         self._writer: CacheWriter | None = None
         self._done = False
@@ -89,24 +92,19 @@ class ClipsWriter(StreamingWriter):
                 raise RuntimeError(f"{self.path}: frames missing; nothing saved")
             files = [str(self._tmp / name) for name, _, _ in self._clips]
             topology = Sdf.Layer.CreateNew(str(self._tmp / "topology.usdc"))
-            UsdUtils.StitchClipsTopology(topology, files)
-            topology.Save()
-            for root, name in self._clip_roots():
-                manifest = Sdf.Layer.CreateNew(str(self._tmp / name))
-                UsdUtils.StitchClipsManifest(manifest, topology, files, Sdf.Path(root))
-                manifest.Save()
+            with one_thread():  # stitching is a parallel reduction: its order set the bytes
+                UsdUtils.StitchClipsTopology(topology, files)
+                topology.Save()
+                for root, name in self._clip_roots():
+                    manifest = Sdf.Layer.CreateNew(str(self._tmp / name))
+                    UsdUtils.StitchClipsManifest(manifest, topology, files, Sdf.Path(root))
+                    manifest.Save()
             result = self._result_layer()
-            # into place: the folder first (an older one is replaced), then the output
-            old = None
-            if self.folder.exists():
-                old = self.folder.with_name(f".{self.folder.name}.{os.getpid()}-{secrets.token_hex(4)}.old")
-                os.replace(self.folder, old)
-            os.replace(self._tmp, self.folder)
-            if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
-            from .files import write_atomically
-
-            write_atomically(self.path, lambda tmp: _export(result, tmp))
+            # the folder and the output, into place together (with a bake's other outputs)
+            self.outputs.stage(self._tmp, self.folder)
+            self.outputs.write(self.path, lambda tmp: _export(result, tmp))
+            if self._own_outputs:
+                self.outputs.commit()
         except BaseException:
             self.abort()
             raise
@@ -157,6 +155,8 @@ class ClipsWriter(StreamingWriter):
             self._writer.abort()
             self._writer = None
         shutil.rmtree(self._tmp, ignore_errors=True)
+        if self._own_outputs:
+            self.outputs.abort()
 
 
 def _export(layer: Sdf.Layer, path: str) -> None:
@@ -175,11 +175,11 @@ class ShotClipsWriter(ClipsWriter):
     shot cache."""
 
     def __init__(self, path: str | Path, scene, *, clip_frames: int, provenance: Mapping[str, Any] = {},
-                 level_sets: Mapping | None = None):
+                 level_sets: Mapping | None = None, outputs=None):
         shot = scene.shot
         super().__init__(path, clip_frames=clip_frames, fps=shot.time_codes_per_second,
                          start_frame=scene.start_frame, end_frame=scene.end_frame, bodies=(),
-                         provenance=provenance)
+                         provenance=provenance, outputs=outputs)
         self._scene = scene
         self._level_sets = dict(level_sets or {})
         self._roots: list[tuple[str, str]] = []

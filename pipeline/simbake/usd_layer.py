@@ -8,6 +8,8 @@ which sublayers it over the input shows the simulated shot:
                     parent; scale (the prim's own, when it is not 1) written once
     /<cloth mesh>   points, normals ("vertex"), velocities (stage units / s) and extent,
                     time-sampled at every frame, in the mesh's own space
+    /<instance>     instanceable = false, for every instanceable prim above a simulated one
+                    (composition ignores overs on instance proxies)
 
 Layer metadata (upAxis, metersPerUnit, kilogramsPerUnit, timeCodesPerSecond,
 framesPerSecond, start and end time codes, defaultPrim) is the input's; values are in the
@@ -101,8 +103,9 @@ class ShotLayerWriter(StreamingWriter):
 
     def __init__(self, path: str | Path, scene, *, provenance: Mapping[str, Any] = {},
                  flush_every: int = 50, start_frame: int | None = None, end_frame: int | None = None,
-                 level_sets: Mapping[int, Path] | None = None):
+                 level_sets: Mapping[int, Path] | None = None, outputs=None):
         self.path = Path(path)
+        self.outputs = outputs  # simbake.outputs.Outputs: staged there at close (CacheWriter's)
         suffix = self.path.suffix.lower()
         if suffix not in FORMATS:
             raise ValueError(f"{self.path}: unknown USD file extension {self.path.suffix!r}")
@@ -135,6 +138,10 @@ class ShotLayerWriter(StreamingWriter):
         copy_stage_metadata(layer, shot)
         layer.customLayerData = _to_usd(dict(provenance), "customLayerData")
 
+        # instances above simulated prims become ordinary prims here: composition ignores
+        # opinions on instance proxies, so the overs below would show nothing
+        for path in getattr(shot, "instances", ()):
+            Sdf.CreatePrimInLayer(layer, path).SetInfo("instanceable", False)
         # prims this layer writes (value clips go on their root prims)
         self.sampled_prims = [b.prim_path for b in shot.bodies] + [c.prim_path for c in shot.cloths]
         self._bodies = []  # (body index, translate path, orient path, Vec3 type, Quat type)
@@ -354,9 +361,10 @@ class ShotLayerWriter(StreamingWriter):
 # --shot: a stage that sublayers the cache over the input
 # --------------------------------------------------------------------------------------------
 
-def write_shot_stage(path: str | Path, cache: str | Path, shot) -> Path:
+def write_shot_stage(path: str | Path, cache: str | Path, shot, outputs=None) -> Path:
     """Write ``path``: a stage whose sublayers are ``cache`` (stronger) over the input shot,
-    both by relative path, with the input's stage metadata (written beside and renamed)."""
+    both by relative path, with the input's stage metadata (written beside and renamed; with
+    `outputs`, a simbake.outputs.Outputs, staged there to be renamed with the cache)."""
     path = Path(path)
     here = path.absolute().parent
 
@@ -378,5 +386,8 @@ def write_shot_stage(path: str | Path, cache: str | Path, shot) -> Path:
         if not layer.Export(tmp, args={"format": fmt}):
             raise OSError(f"{path}: writing the shot stage failed")
 
-    write_atomically(path, write)
+    if outputs is not None:
+        outputs.write(path, write)
+    else:
+        write_atomically(path, write)
     return path

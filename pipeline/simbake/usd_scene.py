@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +34,9 @@ from .errors import SceneError
 from .scene import (Body, Cloth, Ground, Key, Scene, Shape, DEFAULT_DENSITY, CLOTH_MODELS,
                     COMPRESSION_MODES, CLOTH_INTEGRATORS, RESERVED_NAMES)
 from . import usd_schema
+from .limits import INERTIA_TOLERANCE, MAX_FRAMES, check_scene
+from .usd_writer import one_thread
+from .usd_diagnostics import clean, error_texts, location, shown_path, syntax_message, trapped
 
 __all__ = ["ShotInfo", "ShotBody", "ShotCloth", "load_shot", "USD_SCENE_SUFFIXES"]
 
@@ -93,6 +96,19 @@ class ShotInfo:
     default_prim: str
     bodies: tuple[ShotBody, ...]
     cloths: tuple[ShotCloth, ...]
+    # every file the stage names (layers, clips, assets such as .vdb files), resolved: never
+    # an output, never inside a folder an output replaces
+    dependencies: tuple[Path, ...] = ()
+    # instanceable prims above a simulated prim: made ordinary (instanceable = false) in the
+    # cache layer, where composition would ignore overs on their instance proxies
+    instances: tuple[str, ...] = ()
+    # (a scene key, the prim and attribute it was read from), for messages about the range
+    keys: tuple[tuple[str, str], ...] = ()
+
+    def usd_key(self, key: str) -> str:
+        """The prim and attribute that a scene key (``bodies[0].shape.size[1]``) was read from."""
+        found = [(k, where) for k, where in self.keys if key == k or key.startswith((k + ".", k + "["))]
+        return max(found, key=lambda e: len(e[0]))[1] if found else key
 
     @property
     def axes(self) -> np.ndarray:
@@ -168,12 +184,20 @@ def _decimals(values) -> tuple[float, ...]:
     return tuple(_decimal(v) for v in values)
 
 
+def _show(values) -> str:
+    """Numbers as a user wrote them: (100, 0.001, 0.001), not (np.float64(100.0), ...)."""
+    return "(" + ", ".join(f"{float(v):g}" for v in np.asarray(values, dtype=np.float64).reshape(-1)) + ")"
+
+
 # --------------------------------------------------------------------------------------------
 # Loading
 # --------------------------------------------------------------------------------------------
 
 def load_shot(path: str | os.PathLike[str]) -> Scene:
-    """Read a USD stage as a Scene; raise :class:`SceneError` (one line) on any problem."""
+    """Read a USD stage as a Scene; raise :class:`SceneError` (one line) on any problem:
+    a syntax error (at its line and column, in whichever layer), a composition error (a
+    missing or cyclic sublayer, a reference or payload that does not resolve), bad values.
+    OpenUSD's own warnings become the scene's warnings; nothing of OpenUSD's reaches stderr."""
     usd_schema.register()  # before the first stage, so SimbakeClothAPI is a known schema
     from pxr import Tf, Usd
 
@@ -182,20 +206,36 @@ def load_shot(path: str | os.PathLike[str]) -> Scene:
     stage_path = given.parent.resolve() / given.name
     if not stage_path.is_file():
         raise SceneError(file, "", "file not found" if not stage_path.exists() else "not a file")
-    try:
-        stage = Usd.Stage.Open(str(stage_path), Usd.Stage.LoadAll)
-    except Tf.ErrorException as error:
-        first = str(error).strip().splitlines()
-        detail = next((line.strip() for line in first if line.strip()), "unreadable")
-        raise SceneError(file, "", f"cannot open USD stage: {_short(detail, 160)}") from None
+    stage, raised = None, []
+    with trapped() as opened:
+        try:
+            stage = Usd.Stage.Open(str(stage_path), Usd.Stage.LoadAll)
+        except Tf.ErrorException as error:
+            raised = error_texts(error)
     if stage is None:
-        raise SceneError(file, "", "cannot open USD stage")
-    return _Reader(file, stage_path, stage).scene()
+        raise _usd_error(file, stage_path, raised + opened.errors + opened.warnings, "cannot open USD stage")
+    composition = [str(e) for e in stage.GetCompositionErrors()]
+    if composition or opened.errors:
+        raise _usd_error(file, stage_path, opened.errors + composition, "composition error")
+    with trapped() as parsing:
+        reader = _Reader(file, stage_path, stage)
+        scene = reader.scene()
+    if parsing.errors:
+        raise _usd_error(file, stage_path, parsing.errors, "OpenUSD reported an error")
+    lines = [f"{file}: OpenUSD: {clean(text)}" for text in opened.warnings + parsing.warnings]
+    scene = replace(scene, warnings=scene.warnings + tuple(dict.fromkeys(lines)))
+    check_scene(scene)  # the physical range, named by prim and attribute
+    return scene
 
 
-def _short(text: str, limit: int) -> str:
-    text = " ".join(text.split())
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+def _usd_error(file: str, stage_path: Path, texts: list[str], what: str) -> SceneError:
+    """One line for what OpenUSD reported: a syntax error at its location, else the first."""
+    where = location(texts)
+    if where is not None:
+        return SceneError(shown_path(where[0], file, stage_path), where[1], syntax_message(texts))
+    first = clean(texts[0]) if texts else "unreadable"
+    more = f" (and {len(texts) - 1} more)" if len(texts) > 1 else ""
+    return SceneError(file, "", f"{what}: {first}{more}")
 
 
 class _Reader:
@@ -206,6 +246,8 @@ class _Reader:
 
         self.file, self.path, self.stage = file, path, stage
         self.warnings: list[str] = []
+        self.keys: list[tuple[str, str]] = []    # scene key -> "PRIM.attribute" (ShotInfo.keys)
+        self.instances: set[str] = set()          # instanceable prims above simulated ones
         self._warned: set[str] = set()
         axis = UsdGeom.GetStageUpAxis(stage)
         if axis not in ("Y", "Z"):
@@ -227,6 +269,9 @@ class _Reader:
                 raise self.error("", name, f"must be an integer time code, got {value}")
         if self.end < self.start:
             raise self.error("", "endTimeCode", f"must be >= startTimeCode ({self.start:g}), got {self.end:g}")
+        if self.end - self.start + 1 > MAX_FRAMES:  # before any animation is sampled
+            raise self.error("", "endTimeCode", f"{self.end - self.start + 1:.0f} frames is more than the budget of "
+                                                f"{MAX_FRAMES:,} frames in one bake; bake it in parts")
         self.tcps = float(stage.GetTimeCodesPerSecond())
         if not (math.isfinite(self.tcps) and self.tcps > 0):
             raise self.error("", "timeCodesPerSecond", f"must be > 0, got {self.tcps}")
@@ -283,16 +328,12 @@ class _Reader:
     # -- the scene ----------------------------------------------------------------------------
 
     def scene(self) -> Scene:
-        from pxr import Sdf, UsdPhysics, Work
+        from pxr import Sdf, UsdPhysics
 
         # The parser runs on one thread: deterministic order of reports, and it is known
         # to race with many mesh colliders under one body on several threads.
-        limit = Work.GetConcurrencyLimit()
-        Work.SetConcurrencyLimit(1)
-        try:
+        with one_thread():
             parsed = UsdPhysics.UsdPhysicsLoadStageFromPrimRange(self.stage, [Sdf.Path.absoluteRootPath])
-        finally:
-            Work.SetConcurrencyLimit(limit)
         descs = {kind: list(zip(*value)) for kind, value in parsed.items()}
         T = UsdPhysics.ObjectType
 
@@ -339,9 +380,11 @@ class _Reader:
                     raise self.error(p, "", "a second static Plane: simbake has one ground plane")
                 ground = self._ground(p, d)
             else:
-                bodies.append(self._static_body(p, d, used_names))
+                bodies.append(self._static_body(p, d, used_names, len(bodies)))
 
         cloths, shot_cloths = self._cloths(used_names)
+        self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", "startTimeCode"),
+                      ("scene.end_frame", "endTimeCode"), ("solver.substeps", "endTimeCode")]
         fps_meta = self.stage.GetFramesPerSecond() if self.stage.GetRootLayer().HasFramesPerSecond() else None
         info = ShotInfo(
             path=self.path,
@@ -351,10 +394,29 @@ class _Reader:
             time_codes_per_second=self.tcps, frames_per_second=fps_meta,
             start_time_code=self.start, end_time_code=self.end,
             default_prim=self.stage.GetRootLayer().defaultPrim,
-            bodies=tuple(shot_bodies), cloths=tuple(shot_cloths))
+            bodies=tuple(shot_bodies), cloths=tuple(shot_cloths), dependencies=self._dependencies(),
+            instances=tuple(sorted(self.instances)), keys=tuple(self.keys))
         return Scene(path=self.path, source=self.file, fps=self.tcps, start_frame=int(self.start),
                      end_frame=int(self.end), gravity=gravity, ground=ground, bodies=tuple(bodies),
                      cloths=tuple(cloths), warnings=tuple(self.warnings), shot=info)
+
+    def _dependencies(self) -> tuple[Path, ...]:
+        """Every layer and asset the stage names (sublayers, references, payloads, value clips,
+        asset-valued attributes), resolved."""
+        from pxr import Sdf, UsdUtils
+
+        layers, assets, _ = UsdUtils.ComputeAllDependencies(Sdf.AssetPath(str(self.path)))
+        paths = [layer.realPath for layer in layers if layer.realPath] + [a for a in assets if a]
+        return tuple(dict.fromkeys(Path(os.path.realpath(p)) for p in paths))
+
+    def _instance_roots(self, prim) -> None:
+        """Remember every instance at or above `prim` (an instance proxy): the cache layer makes
+        them ordinary prims so that composition reads its overs."""
+        p = prim
+        while p and not p.IsPseudoRoot():
+            if p.IsInstance():
+                self.instances.add(str(p.GetPath()))
+            p = p.GetParent()
 
     def _gravity(self, scenes) -> tuple[float, float, float]:
         if not scenes:
@@ -365,6 +427,7 @@ class _Reader:
         from pxr import UsdPhysics
 
         api = UsdPhysics.Scene(self.stage.GetPrimAtPath(path))
+        self.keys.append(("scene.gravity", f"{path}.physics:gravityMagnitude"))
         # unauthored: 9.81 m/s^2 down the up axis, exactly (the parser's is a float32)
         direction = np.asarray(_decimals(d.gravityDirection), dtype=np.float64)
         if not api.GetGravityDirectionAttr().HasAuthoredValue():
@@ -372,8 +435,10 @@ class _Reader:
         magnitude = _decimal(d.gravityMagnitude)
         if not api.GetGravityMagnitudeAttr().HasAuthoredValue() or magnitude == -math.inf:
             magnitude = 9.81 / self.mpu
-        if not (np.isfinite(direction).all() and math.isfinite(magnitude)):
-            raise self.error(path, "physics:gravityMagnitude", "must be finite")
+        if not np.isfinite(direction).all():
+            raise self.error(path, "physics:gravityDirection", f"must be finite, got {_show(direction)}")
+        if not math.isfinite(magnitude):
+            raise self.error(path, "physics:gravityMagnitude", f"must be finite, got {magnitude}")
         norm = np.linalg.norm(direction)
         if norm == 0:
             return (0.0, 0.0, 0.0) if magnitude == 0 else (0.0, -abs(magnitude) * self.mpu, 0.0)
@@ -382,7 +447,9 @@ class _Reader:
     # -- materials ----------------------------------------------------------------------------
 
     def _material(self, shape_path, shape) -> tuple[float, float, float | None]:
-        """(friction, restitution, density in kg/m^3 or None) of a collider's physics material."""
+        """(friction, restitution, density in kg/m^3 or None) of a collider's physics material;
+        its prim is left in `material_path` (the collider's when it has none)."""
+        self.material_path = str(shape_path)
         for m in shape.materials:
             d = self.materials.get(str(m))
             if d is None:
@@ -396,8 +463,11 @@ class _Reader:
                 self.warn(m, f"physics:staticFriction ({float(d.staticFriction):g}) differs from "
                              f"physics:dynamicFriction ({friction:g}); simbake uses one Coulomb "
                              "coefficient, the dynamic one")
-            density = _decimal(d.density) * self.kpu / self.mpu ** 3 if d.density > 0 else None
-            return friction, restitution, density
+            density = _decimal(d.density)
+            if not (math.isfinite(density) and density >= 0):
+                raise self.error(m, "physics:density", f"must be a finite number >= 0 (0: unset), got {density}")
+            self.material_path = str(m)
+            return friction, restitution, density * self.kpu / self.mpu ** 3 if density > 0 else None
         return Body.friction, Body.restitution, None
 
     # -- shapes -------------------------------------------------------------------------------
@@ -435,7 +505,7 @@ class _Reader:
             schema = UsdGeom.Capsule(prim) if prim.IsA(UsdGeom.Capsule) else UsdGeom.Cylinder(prim)
             radius = self._positive(prim, "radius", schema.GetRadiusAttr().Get())
             height = self._positive(prim, "height", schema.GetHeightAttr().Get(), allow_zero=True)
-            axis = schema.GetAxisAttr().Get()
+            axis = self._axis(prim, schema)
             if prim.IsA(UsdGeom.Capsule):
                 mesh = trimesh.creation.capsule(height=height, radius=radius, count=[24, 24])
             else:
@@ -448,6 +518,13 @@ class _Reader:
             return ("mesh", v @ a.T + t, f)
         raise self.error(path, "", f"a collider of type {prim.GetTypeName() or 'none'} is not supported "
                                    "(Cube, Sphere, Capsule, Cylinder, Mesh, or a static Plane)")
+
+    def _axis(self, prim, schema) -> str:
+        """A Capsule's, Cylinder's or Plane's axis token: X, Y or Z."""
+        axis = schema.GetAxisAttr().Get()
+        if axis not in ("X", "Y", "Z"):
+            raise self.error(prim.GetPath(), "axis", f"must be X, Y or Z, got {str(axis)!r}")
+        return axis
 
     def _positive(self, prim, attribute: str, value, allow_zero: bool = False) -> float:
         value = float(value)
@@ -548,6 +625,12 @@ class _Reader:
                              "a collider mesh must be closed and wound outwards (it has holes, open "
                              "edges or inconsistent winding); its mass and level set need an inside")
 
+    def _cloth_keys(self, index: int, path) -> None:
+        """Where each of cloth `index`'s scene keys was read from (for range messages)."""
+        key = f"cloths[{index}]"
+        self.keys += [(key, str(path)), (f"{key}.position", f"{path}.points")]
+        self.keys += [(f"{key}.{name}", f"{path}.simbake:cloth:{_camel(name)}") for name in _CLOTH_KEYS]
+
     def _rigid_body(self, path: str, d, shapes, used: set[str], index: int):
         from pxr import Usd, UsdGeom, UsdPhysics
 
@@ -570,6 +653,7 @@ class _Reader:
                                        "Sphere, Capsule, Cylinder or Mesh at or under it)")
         shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body")
         friction, restitution, material_density = self._material(colliders[0][0].GetPath(), colliders[0][1])
+        self._body_keys(index, path, colliders[0][0].GetPath(), self.material_path)
         for c, s in colliders[1:]:
             if self._material(c.GetPath(), s)[:2] != (friction, restitution):
                 self.warn(path, "colliders with different physics materials; simbake uses the first one's")
@@ -593,7 +677,21 @@ class _Reader:
             keys=keys, center_of_mass=com, inertia=inertia, prim_path=path)
         if kinematic:
             return body, None  # the input's own animation already says where it is
+        self._instance_roots(prim)  # the cache writes its pose: composition must read it
         return body, self._shot_body(prim, index, k)
+
+    def _body_keys(self, index: int, path, collider, material) -> None:
+        """Where each of body `index`'s scene keys was read from (for range messages)."""
+        key = f"bodies[{index}]"
+        self.keys += [(key, str(path)), (f"{key}.shape.radius", f"{collider}.radius"),
+                      (f"{key}.shape.size", f"{collider}.size"), (f"{key}.density", f"{path}.physics:density"),
+                      (f"{key}.mass", f"{path}.physics:mass"), (f"{key}.position", f"{path}.xformOp:translate"),
+                      (f"{key}.keys", f"{path}.xformOp:translate"),
+                      (f"{key}.linear_velocity", f"{path}.physics:velocity"),
+                      (f"{key}.angular_velocity", f"{path}.physics:angularVelocity"),
+                      (f"{key}.inertia", f"{path}.physics:diagonalInertia"),
+                      (f"{key}.friction", f"{material}.physics:dynamicFriction"),
+                      (f"{key}.restitution", f"{material}.physics:restitution")]
 
     def _shot_body(self, prim, index: int, world_scale: np.ndarray) -> ShotBody:
         from pxr import UsdGeom
@@ -660,36 +758,64 @@ class _Reader:
                 mass = m * self.kpu
             elif rho > 0:
                 density = rho * self.kpu / self.mpu ** 3
-            c = api.GetCenterOfMassAttr().Get()
-            if c is not None and np.isfinite(np.asarray(c, dtype=np.float64)).all() \
-                    and not np.all(np.asarray(c) == -np.inf):
-                # authored in the prim's local space (its scale included) -> body frame (m)
-                com = _vec(self.body_points(np.asarray(c, dtype=np.float64) * k))
-            diag = api.GetDiagonalInertiaAttr().Get()
-            if diag is not None and np.any(np.asarray(diag, dtype=np.float64) != 0):
-                diag = np.asarray(diag, dtype=np.float64)
-                if not (np.isfinite(diag).all() and (diag > 0).all()):
-                    raise self.error(path, "physics:diagonalInertia", f"must be three numbers > 0, got {tuple(diag)}")
-                axes = api.GetPrincipalAxesAttr().Get()
-                q = (1.0, 0.0, 0.0, 0.0)
-                if axes is not None and (axes.GetReal() != 0 or any(axes.GetImaginary())):
-                    q = (axes.GetReal(), *axes.GetImaginary())
-                    q = tuple(c / math.sqrt(sum(x * x for x in q)) for c in q)
-                rot = _quat_matrix(q)
-                tensor = self.C @ rot @ np.diag(diag * self.kpu * self.mpu ** 2) @ rot.T @ self.C.T
-                inertia = tuple(_vec(row) for row in tensor)
-                if mass is None:
-                    raise self.error(path, "physics:mass", "an authored diagonalInertia needs an authored mass")
+            com = self._center_of_mass(api, path, k)
+            inertia = self._inertia(api, path)
+            if inertia is not None and mass is None:
+                raise self.error(path, "physics:mass", "an authored diagonalInertia needs an authored mass")
         if mass is None and density is None:
             for c in colliders:
                 if c.HasAPI(UsdPhysics.MassAPI):
                     rho = _decimal(UsdPhysics.MassAPI(c).GetDensityAttr().Get() or 0.0)
+                    if not math.isfinite(rho) or rho < 0:
+                        raise self.error(c.GetPath(), "physics:density", f"must be a finite number >= 0 (0: unset), got {rho}")
                     if rho > 0:
                         density = rho * self.kpu / self.mpu ** 3
                         break
         if mass is None and density is None:
             density = material_density if material_density else DEFAULT_DENSITY
         return mass, density, com, inertia
+
+    def _center_of_mass(self, api, path, k: np.ndarray):
+        """An authored centre of mass in the body frame (m), or None (USD's unauthored value is
+        -inf on every axis); NaN or a partly infinite point is an error."""
+        c = api.GetCenterOfMassAttr().Get()
+        if c is None:
+            return None
+        c = np.asarray(c, dtype=np.float64)
+        if np.all(c == -np.inf):
+            return None
+        if not np.isfinite(c).all():
+            raise self.error(path, "physics:centerOfMass", f"must be three finite numbers, got {_show(c)}")
+        # authored in the prim's local space (its scale included) -> body frame (m)
+        return _vec(self.body_points(c * k))
+
+    def _inertia(self, api, path):
+        """An authored inertia tensor (kg m^2, body frame) from diagonalInertia and
+        principalAxes, or None when unauthored (zero). Refused unless physically possible:
+        positive moments that satisfy the triangle inequality (no moment larger than the other
+        two together, as for every real mass distribution), unit principal axes."""
+        diag = api.GetDiagonalInertiaAttr().Get()
+        if diag is None or not np.any(np.asarray(diag, dtype=np.float64) != 0):
+            return None
+        diag = np.asarray(diag, dtype=np.float64)
+        if not (np.isfinite(diag).all() and (diag > 0).all()):
+            raise self.error(path, "physics:diagonalInertia", f"must be three finite numbers > 0, got {_show(diag)}")
+        largest = int(np.argmax(diag))
+        if diag[largest] > (diag.sum() - diag[largest]) * (1 + INERTIA_TOLERANCE):
+            raise self.error(path, "physics:diagonalInertia",
+                             f"{_show(diag)} is not the inertia of any body: the largest moment must not exceed "
+                             "the sum of the other two (triangle inequality)")
+        axes = api.GetPrincipalAxesAttr().Get()
+        q = (1.0, 0.0, 0.0, 0.0)
+        if axes is not None:
+            q = np.array([axes.GetReal(), *axes.GetImaginary()], dtype=np.float64)
+            norm = float(np.linalg.norm(q)) if np.isfinite(q).all() else math.nan
+            if not (math.isfinite(norm) and norm > 0) and np.any(q != 0):
+                raise self.error(path, "physics:principalAxes", f"must be a finite, non-zero quaternion, got {_show(q)}")
+            q = tuple(q / norm) if norm > 0 else (1.0, 0.0, 0.0, 0.0)
+        rot = _quat_matrix(q)
+        tensor = self.C @ rot @ np.diag(diag * self.kpu * self.mpu ** 2) @ rot.T @ self.C.T
+        return tuple(_vec(row) for row in tensor)
 
     def _keys(self, prim) -> tuple[Key, ...]:
         """A kinematic body's world pose at every time code when its transform is animated."""
@@ -711,11 +837,12 @@ class _Reader:
             keys.append(Key(time=(code - self.start) / self.tcps, position=position, orientation=orientation))
         return tuple(keys)
 
-    def _static_body(self, path, d, used: set[str]) -> Body:
+    def _static_body(self, path, d, used: set[str], index: int) -> Body:
         prim = self.stage.GetPrimAtPath(path)
         r, t, _ = self.frame(prim, "static collider")
         shape = self._shape(path, [prim], r, t, "static collider")
         friction, restitution, _ = self._material(path, d)
+        self._body_keys(index, path, path, self.material_path)
         position, orientation = self.pose(r, t)
         return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
                     position=position, orientation=orientation, linear_velocity=(0.0, 0.0, 0.0),
@@ -727,12 +854,15 @@ class _Reader:
         from pxr import UsdGeom
 
         r, t, _ = self.frame(prim, "ground plane")
-        axis = {"X": 0, "Y": 1, "Z": 2}[UsdGeom.Plane(prim).GetAxisAttr().Get()]
+        axis = "XYZ".index(self._axis(prim, UsdGeom.Plane(prim)))
         normal = self.C @ r[:, axis]
         if abs(abs(normal[1]) - 1.0) > 1e-6:
             raise self.error(path, "axis", f"a static Plane is the ground and must face the stage's up "
-                                           f"axis ({self.up_axis}); this one faces {tuple(np.round(r[:, axis], 6))}")
+                                           f"axis ({self.up_axis}); this one faces {_show(np.round(r[:, axis], 6))}")
         friction, restitution, _ = self._material(path, d)
+        self.keys += [("ground.height", f"{path}.xformOp:translate"),
+                      ("ground.friction", f"{self.material_path}.physics:dynamicFriction"),
+                      ("ground.restitution", f"{self.material_path}.physics:restitution")]
         return Ground(height=self.point(t)[1], friction=friction, restitution=restitution)
 
     # -- cloth --------------------------------------------------------------------------------
@@ -753,6 +883,8 @@ class _Reader:
             world = self.world(prim)
             vertices = (local @ world[:3, :3].T + world[:3, 3]) @ self.C.T * self.mpu
             a = _ClothAttributes(self, prim)
+            self._cloth_keys(len(cloths), path)
+            self._instance_roots(prim)
             pinned = a.ints("pinned")
             bad = [i for i in pinned if not 0 <= i < len(vertices)]
             if bad:
@@ -782,6 +914,15 @@ class _Reader:
         return cloths, targets
 
 
+_CLOTH_KEYS = ("area_density", "stretch_stiffness", "bend_stiffness", "damping", "strain_limit",
+               "friction", "thickness", "poisson_ratio")
+
+
+def _camel(key: str) -> str:
+    first, *rest = key.split("_")
+    return first + "".join(word.title() for word in rest)
+
+
 class _ClothAttributes:
     """Typed reads of simbake:cloth:* on one prim; unauthored attributes give the SI default."""
 
@@ -793,6 +934,13 @@ class _ClothAttributes:
         if not attr or not attr.HasAuthoredValue():
             return None
         return attr.Get(self.reader.start)
+
+    @staticmethod
+    def _type(value) -> str:
+        """The type a value was authored with (the schema's own type may differ)."""
+        from pxr import Sdf
+
+        return str(Sdf.GetValueTypeNameForValue(value)) or type(value).__name__
 
     def _error(self, name: str, problem: str) -> SceneError:
         return self.reader.error(self.prim.GetPath(), f"simbake:cloth:{name}", problem)
@@ -823,11 +971,18 @@ class _ClothAttributes:
 
     def boolean(self, name: str, default: bool) -> bool:
         value = self._get(name)
-        return default if value is None else bool(value)
+        if value is not None and not isinstance(value, bool):
+            raise self._error(name, f"must be a bool (1 or 0), got {self._type(value)} {_short(repr(value))}")
+        return default if value is None else value
 
     def ints(self, name: str) -> list[int]:
+        """Point indices: an int[] (a float or string array would be guessed at, so it is refused)."""
         value = self._get(name)
-        return [] if value is None else [int(i) for i in value]
+        if value is None:
+            return []
+        if self._type(value) not in ("int[]", "int64[]", "uint[]", "uint64[]"):
+            raise self._error(name, f"must be an int[] of point indices, got {self._type(value)} {_short(repr(value) if isinstance(value, str) else str(value))}")
+        return [int(i) for i in value]
 
 
 # --------------------------------------------------------------------------------------------
@@ -877,6 +1032,10 @@ def _face_order(tris: list[np.ndarray], counts: np.ndarray) -> np.ndarray:
     keys = np.concatenate(keys)
     order = np.argsort(keys, kind="stable")
     return np.concatenate(tris)[order]
+
+
+def _short(text: str, limit: int = 60) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:

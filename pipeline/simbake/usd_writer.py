@@ -54,6 +54,7 @@ import math
 import os
 import uuid
 import weakref
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -252,6 +253,21 @@ def _vertex_normals(points: np.ndarray, counts: np.ndarray, indices: np.ndarray)
     return normals
 
 
+@contextmanager
+def one_thread():
+    """OpenUSD's own work (Work, and TBB under it) on one thread for the block: its parallel
+    reductions (UsdUtils' clip stitching, the UsdPhysics parser) then run in one fixed order,
+    so the same input gives the same bytes and the same reports every time."""
+    from pxr import Work
+
+    limit = Work.GetConcurrencyLimit()
+    Work.SetConcurrencyLimit(1)
+    try:
+        yield
+    finally:
+        Work.SetConcurrencyLimit(limit)
+
+
 def _cleanup(paths: list[Path]) -> None:  # weakref.finalize callback: must not reference self
     for p in paths:
         _remove(p)
@@ -316,7 +332,11 @@ class StreamingWriter:
                 raise OSError(f"{self._tmp_text}: exporting the USD layer failed")
             final = self._tmp_text
         self._layer = None
-        commit(Path(final), Path(self.path))
+        outputs = getattr(self, "outputs", None)
+        if outputs is None:
+            commit(Path(final), Path(self.path))
+        else:  # one of a bake's outputs: renamed into place with the others (simbake.outputs)
+            outputs.stage(Path(final), Path(self.path))
         if final != self._tmp:
             _remove(self._tmp)
 
@@ -335,13 +355,16 @@ class CacheWriter(StreamingWriter):
     :meth:`abort` (or an exception inside a ``with`` block) leaves ``path`` as it was.
     ``.usda`` is baked into a crate temp file and converted at :meth:`close`, which then
     holds the whole cache in memory once (text USD cannot be appended to).
+    ``outputs`` (a :class:`simbake.outputs.Outputs`): the finished file is staged there, to be
+    renamed into place with a bake's other outputs, instead of at :meth:`close`.
     """
 
     def __init__(self, path: str | Path, *, fps: float, start_frame: int, end_frame: int,
                  bodies: Sequence[BodyPrim], cloths: Sequence[ClothPrim] = (),
                  provenance: Mapping[str, Any] = {}, flush_every: int = 50,
-                 instancers: Sequence["InstancerGroup"] = ()):
+                 instancers: Sequence["InstancerGroup"] = (), outputs=None):
         self.path = Path(path)
+        self.outputs = outputs
         suffix = self.path.suffix.lower()
         if suffix not in FORMATS:
             raise ValueError(f"{self.path}: unknown USD file extension {self.path.suffix!r} "

@@ -184,3 +184,57 @@ def test_settings_and_descriptions_take_their_fields_by_keyword():
     assert world.settings.threads == 0
     with pytest.raises(ValueError, match="unknown choice 'mesh'"):
         _core.ClothDesc(model="mesh")
+
+
+# --------------------------------------------------------------------------------------------
+# issue 30, 10: bounded work, and indices that cannot wrap
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("make", [_core.box_mesh, _core.sphere_mesh])
+def test_mesh_subdivisions_are_bounded_before_anything_is_allocated(make):
+    """`_core.box_mesh(v, 2**31-1)` allocated 3.4 GB instead of raising: at most 512
+    subdivisions (3.1 million triangles)."""
+    size = np.ones(3) if make is _core.box_mesh else 1.0
+    for s in (0, 513, 2**31 - 1):
+        with pytest.raises(ValueError, match=rf"subdivisions must be in \[1, 512\], got {s}"):
+            make(size, s)
+    vertices, triangles = make(size, 512)
+    assert len(triangles) == 12 * 512 ** 2 and len(vertices) == 6 * 512 ** 2 + 2
+
+
+def test_triangle_pair_search_refuses_quadratic_work_up_front():
+    """`intersecting_triangle_pairs` on 100k random triangles never returned (~1e10 candidate
+    pairs in a few cells): more than its budget of 2e8 candidate pairs is refused before any
+    is tested, in well under a second."""
+    import time
+
+    rng = np.random.default_rng(30)
+    vertices = rng.random((300_000, 3))
+    triangles = np.arange(300_000, dtype=np.int32).reshape(-1, 3)
+    start = time.monotonic()
+    with pytest.raises(ValueError, match=r"candidate pairs, more than the budget of 200000000"):
+        _core.intersecting_triangle_pairs(vertices, triangles)
+    assert time.monotonic() - start < 5
+    # an even sheet of the same count is near linear and answers
+    n = 224  # 224 x 224 grid: 99,458 triangles
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
+    grid = np.stack([i.ravel() / n, np.zeros(n * n), j.ravel() / n], axis=1)
+    p = (j[:-1, :-1] * n + i[:-1, :-1]).ravel()
+    sheet = np.concatenate([np.stack([p, p + n, p + n + 1], 1), np.stack([p, p + n + 1, p + 1], 1)]).astype(np.int32)
+    assert _core.intersecting_triangle_pairs(grid, sheet).shape == (0, 2)
+
+
+@pytest.mark.parametrize("triangles, words", [
+    (np.array([[0, 1, 2**32 + 2]], dtype=np.int64), "triangle index 4294967298 does not fit in 32 bits"),
+    (np.array([[0, 1, -(2**40)]], dtype=np.int64), "triangle index -1099511627776 does not fit in 32 bits"),
+    (np.array([[0.0, 1.7, 2.2]]), "triangle indices must be integers, got an array of float64"),
+])
+def test_triangle_indices_never_wrap_or_truncate(triangles, words):
+    """int64 triangle indices past 2^32 wrapped silently (2^32 + 2 became vertex 2), floats were
+    truncated: every function taking triangles refuses them."""
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    for call in (_core.vertex_normals, _core.is_closed, _core.mass_properties, _core.intersecting_triangle_pairs):
+        with pytest.raises(ValueError, match=words):
+            call(vertices, triangles)
+    assert _core.vertex_normals(vertices, np.array([[0, 1, 2]], dtype=np.int64)).shape == (3, 3)
+    assert _core.vertex_normals(vertices, np.zeros((0, 3))).shape == (3, 3)  # no triangles at all

@@ -164,3 +164,23 @@ def test_a_shots_clips_read_back_as_its_single_file_cache(tmp_path, shot, clip_f
     context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
     assert [e.GetMessage() for e in context.Validate(b)] == []
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_the_same_clips_bake_gives_the_same_bytes(tmp_path):
+    """Issue 30, 19: one of three identical --clips bakes wrote a topology.usdc with different
+    bytes (same content): UsdUtils stitches clips in a parallel reduction whose order set the
+    bytes. Many small clips (29 here) give it room to split differently from run to run (on
+    main, two different topologies in four runs)."""
+    import hashlib
+
+    from test_cli import simbake
+
+    text = (Path(__file__).resolve().parents[2] / "assets" / "scenes" / "tower.toml").read_text()
+    (tmp_path / "tower.toml").write_text(text.replace("end_frame = 241", "end_frame = 30"))
+    digests = set()
+    for run in range(6):
+        result = simbake("bake", "tower.toml", "-o", "t.usdc", "--clips", "1", "-q", cwd=tmp_path)
+        assert result.returncode == 0, result.stderr
+        files = [tmp_path / "t.usdc"] + [tmp_path / "t.clips" / n for n in ("topology.usdc", "manifest.usda")]
+        digests.add(tuple(hashlib.sha256(f.read_bytes()).hexdigest() for f in files))
+    assert len(digests) == 1

@@ -142,26 +142,6 @@ def test_write_atomically_on_a_full_disk_keeps_the_old_file(tmp_path):
     assert listing(tmp_path) == ["out.qa.json"]
 
 
-def test_qa_sidecar_full_disk_is_one_line_and_keeps_old_files(write_scene, tmp_path, monkeypatch):
-    """In process: the sidecar's write fails with ENOSPC -> OutputError; the CLI's guard
-    turns it into one line and status 1."""
-    import simbake.qa as qa
-    from simbake.cli import main
-
-    write_scene(DROP_SCENE)
-    (tmp_path / "out.qa.json").write_text("old\n")
-    real = qa.write_atomically
-
-    def failing(path, write, verify=None):
-        real(path, lambda tmp: (write(tmp), (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device"))))
-
-    monkeypatch.setattr(qa, "write_atomically", failing)
-    monkeypatch.chdir(tmp_path)
-    assert main(["bake", "scene.toml", "-o", "out.usdc", "-q"]) == 1
-    assert (tmp_path / "out.qa.json").read_text() == "old\n"
-    assert not any(n.startswith(".") for n in listing(tmp_path))
-
-
 def run_on_full_disk(tmp_path: Path, out: str, command: list[str], leave_kb: int) -> subprocess.CompletedProcess:
     """Run `command` in a private mount namespace, in a small tmpfs (tmp_path/full) that
     holds `out` (the bytes b"precious") and is otherwise filled up but for `leave_kb`; its

@@ -210,3 +210,69 @@ def test_broken_stdout_pipe_is_quiet_and_the_cache_is_whole(tmp_path):
     assert result.returncode == 128 + signal.SIGPIPE
     assert result.stderr == ""
     assert (tmp_path / "o.usdc").read_bytes().startswith(b"PXR-USDC")
+
+
+# --------------------------------------------------------------------------------------------
+# issue 30, 14 and 19
+# --------------------------------------------------------------------------------------------
+
+def test_a_binary_obj_says_it_is_not_text(tmp_path):
+    """Issue 30, 14: a garbage `.obj` said "No module named 'charset_normalizer'"."""
+    (tmp_path / "junk.obj").write_bytes(bytes(range(256)) * 8)
+    line = assert_one_line_error(run_simbake("levelset", "junk.obj", "-o", "junk.vdb", cwd=tmp_path))
+    assert "junk.obj" in line and "not UTF-8 text" in line and "charset" not in line
+    assert listing(tmp_path) == ["junk.obj"]
+
+
+def test_a_voxel_larger_than_the_mesh_is_refused(tmp_path):
+    """Issue 30, 19: `levelset --voxel-size 1e9` baked a grid of 1e9 m voxels of a 1 m mesh."""
+    (tmp_path / "tetra.obj").write_text(TETRA)
+    line = assert_one_line_error(run_simbake("levelset", "tetra.obj", "-o", "t.vdb", "--voxel-size", "1e9",
+                                             cwd=tmp_path))
+    assert "--voxel-size" in line and "larger than the mesh (1 m across)" in line
+    assert listing(tmp_path) == ["tetra.obj"]
+
+
+def test_an_empty_cache_dir_variable_is_unset(tmp_path, monkeypatch):
+    """Issue 30, 19: `SIMBAKE_CACHE_DIR=""` wrote `./levelsets` into the working directory."""
+    from simbake.assets import cache_dir
+
+    monkeypatch.setenv("SIMBAKE_CACHE_DIR", "")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == tmp_path / "xdg" / "simbake"
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "tetra.obj").write_text(TETRA)
+    (work / "scene.toml").write_text(textwrap.dedent(HEAD + SPHERE + """
+        [[bodies]]
+        name = "tet"
+        mesh = "tetra.obj"
+        position = [2.0, 0.0, 0.0]
+    """))
+    result = run_simbake("bake", "scene.toml", "-o", "out.usdc", "-q", cwd=work,
+                         env={**os.environ, "SIMBAKE_CACHE_DIR": "", "XDG_CACHE_HOME": str(tmp_path / "xdg")})
+    assert result.returncode == 0, result.stderr
+    assert "levelsets" not in listing(work)
+    assert list((tmp_path / "xdg" / "simbake" / "levelsets").glob("*.vdb"))
+
+
+def test_memory_outgrowing_the_budget_mid_bake_stops_it_cleanly(capsys, tmp_path, monkeypatch):
+    """Issue 30, 8: the estimate cannot foresee everything (a folding cloth's self-collision
+    keeps more as it folds): the bake watches its resident memory every frame and stops once
+    it is over the budget, one line, exit 1, nothing written, instead of swapping or being
+    killed. Here the memory the process holds is made to grow past the budget at frame 3."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SIMBAKE_MEMORY_BUDGET", "4G")
+    Path("s.toml").write_text(scene_text(HEAD.replace("end_frame = 3", "end_frame = 6"), CLOTH))
+    (tmp_path / "out.usdc").write_bytes(b"an earlier cache")
+    frames = []
+
+    def held() -> int:
+        frames.append(1)
+        return (1 if len(frames) < 2 else 5) * 2 ** 30
+
+    monkeypatch.setattr(limits, "resident_bytes", held)
+    status, err, _ = cli(capsys, "bake", "s.toml", "-o", "out.usdc", "-q")
+    assert status == 1 and len(err) == 1, err
+    assert "frame 3: the bake holds 5 GiB of memory, over the budget of 4 GiB" in err[0], err
+    assert listing(tmp_path) == ["out.usdc", "s.toml"] and (tmp_path / "out.usdc").read_bytes() == b"an earlier cache"

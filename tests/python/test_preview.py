@@ -531,3 +531,81 @@ def test_a_wall_plane_is_a_quad_and_a_ground_plane_the_ground(tmp_path):
         assert np.allclose(lo, [-1.7, 0, -0.5]) and np.allclose(hi, [-0.7, 1, 0.5]), (lo, hi)
     finally:
         preview.close()
+
+
+# --------------------------------------------------------------------------------------------
+# issue 30: exact sizes, bounded frames, reports tied to their caches
+# --------------------------------------------------------------------------------------------
+
+def test_a_single_frame_sheet_is_exactly_the_size_asked(tmp_path):
+    """Issue 30, 20: `simbake preview CACHE -o f.png --frames 6:6 --size 320x180` wrote a
+    328 x 188 image (a contact sheet's margin around one frame)."""
+    from PIL import Image
+
+    write_stage(tmp_path / "stage.usda", frames=8)
+    result = run("preview", "stage.usda", "-o", "f.png", "--frames", "6:6", "--size", "320x180", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert Image.open(tmp_path / "f.png").size == (320, 180)
+
+
+def test_previewing_ten_million_frames_is_refused_at_once(tmp_path):
+    """Issue 30, 10: `simbake preview` of a 1e7-frame stage never ended (every frame listed,
+    bounded and drawn). A movie of more than 10,000 frames is refused naming --frames; a
+    contact sheet picks its 8 frames without listing the rest."""
+    import time
+
+    from simbake.preview import parse_frames
+
+    stage = write_stage(tmp_path / "stage.usda")
+    text = stage.read_text()
+    stage.write_text(text.replace("endTimeCode = 3", "endTimeCode = 10000000"))
+    assert "endTimeCode = 10000000" in stage.read_text()
+    start = time.monotonic()
+    result = run("preview", "stage.usda", "-o", "movie.mp4", cwd=tmp_path)
+    assert result.returncode == 2 and "--frames" in result.stderr and "10,000,000 frames" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert time.monotonic() - start < 30
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stage.usda"]
+    assert parse_frames(None, 1, 10_000_000, 8)[-1] == 10_000_000
+
+
+def test_preview_of_a_directory_says_so(tmp_path):
+    """Issue 30, 14: `simbake preview` of a directory said "no such file"."""
+    (tmp_path / "cache.usdc").mkdir()
+    for command in ("preview", "report"):
+        result = run(command, "cache.usdc", "-o", f"out.{'png' if command == 'preview' else 'html'}", cwd=tmp_path)
+        assert result.returncode == 2 and "is a directory" in result.stderr, result.stderr
+
+
+def test_report_of_a_cache_the_sidecar_was_not_written_for_is_refused(write_scene, tmp_path):
+    """Issue 30, 15: `simbake report garbage.usdc` with any `garbage.qa.json` beside it said
+    "clean": the sidecar holds its cache's SHA-256 now."""
+    path = write_scene(BOXES_ONE_CM_DEEP)
+    assert run("bake", str(path), "-o", "x.usdc", "-q", cwd=tmp_path).returncode == 0
+    (tmp_path / "garbage.usdc").write_bytes(b"garbage")
+    (tmp_path / "garbage.qa.json").write_bytes((tmp_path / "x.qa.json").read_bytes())
+    result = run("report", "garbage.usdc", cwd=tmp_path)
+    assert result.returncode == 2 and "garbage.qa.json: cache_sha256: is the QA data of another cache" in result.stderr
+    assert "garbage.report.html" not in {p.name for p in tmp_path.iterdir()}
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda qa: qa["summary"].__setitem__("body_penetration", [1, 2]), "summary.body_penetration"),
+    (lambda qa: qa["scene"]["settings"].pop("bodies"), "scene.settings.bodies"),
+    (lambda qa: qa["figures"]["substeps"].append(3), "figures.substeps"),
+    (lambda qa: qa.__setitem__("frames", "1-3"), "frames"),
+])
+def test_report_of_a_sidecar_of_the_wrong_shape_names_the_key(write_scene, tmp_path, edit, key):
+    """Issue 30, 11: `simbake report` with a sidecar of the wrong shape was an internal error
+    (exit 1)."""
+    import json
+
+    path = write_scene(BOXES_ONE_CM_DEEP)
+    assert run("bake", str(path), "-o", "x.usdc", "-q", cwd=tmp_path).returncode == 0
+    qa = json.loads((tmp_path / "x.qa.json").read_text())
+    edit(qa)
+    (tmp_path / "x.qa.json").write_text(json.dumps(qa))
+    result = run("report", "x.usdc", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"simbake: error: x.qa.json: {key}"), lines

@@ -27,6 +27,13 @@ TEST(Mesh, BoxIsClosedWithExactCorners) {
   EXPECT_NEAR(mesh.vertices.col(2).maxCoeff(), 1.5, 1e-15);
 }
 
+TEST(Mesh, SubdivisionsAreBoundedBeforeAllocating) {
+  for (int s : {0, kMaxSubdivisions + 1, 2147483647}) {
+    EXPECT_THROW(make_box_mesh(Vec3::Ones(), s), std::invalid_argument) << s;
+    EXPECT_THROW(make_sphere_mesh(1.0, s), std::invalid_argument) << s;
+  }
+}
+
 TEST(Mesh, OpenMeshIsNotClosed) {
   TriangleMesh mesh = make_box_mesh(Vec3::Ones(), 1);
   mesh.triangles.conservativeResize(mesh.triangles.rows() - 1, 3);

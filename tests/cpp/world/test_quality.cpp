@@ -90,6 +90,19 @@ TEST(TriangleIntersection, CountsACrossOfTwoStrips) {
   for (const auto& [i, j] : pairs) EXPECT_TRUE(i < 2 && j >= 2);
 }
 
+TEST(TriangleIntersection, WorkBudgetIsCheckedBeforeAnyTest) {
+  // 3,000 random triangles across a unit cube: about 4.5e6 candidate pairs in a few cells;
+  // a budget below that is refused, one above answers as the unbounded search does
+  std::mt19937 rng(30);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  Points x(9000, 3);
+  for (Eigen::Index k = 0; k < x.rows(); ++k) x.row(k) << unit(rng), unit(rng), unit(rng);
+  Triangles t(3000, 3);
+  for (Eigen::Index k = 0; k < t.rows(); ++k) t.row(k) << 3 * k, 3 * k + 1, 3 * k + 2;
+  EXPECT_THROW(intersecting_triangle_pairs(x, t, 1'000'000), std::length_error);
+  EXPECT_EQ(intersecting_triangle_pairs(x, t, 100'000'000), intersecting_triangle_pairs(x, t));
+}
+
 TEST(Quality, BoxPushedOneCentimetreIntoAnother) {
   World world;
   world.set_ground(GroundDef{});

@@ -1,0 +1,191 @@
+"""Motion figures of the QA (simbake.qa): what no solver step should do, measured from the
+bodies' states at every written frame.
+
+* ``energy_gain`` (J): the total energy now less the energy at the start, E(f) - E(start),
+  with E = kinetic + gravitational potential (dynamic bodies and cloths) + the cloths' elastic
+  energy. When bodies start inside each other (deeper than the penetration threshold), the
+  count starts at the first frame they no longer are: pushing them apart makes energy, and
+  the penetration figure already says why. Without a source of energy (a keyed or moving kinematic body) friction, damping and
+  inelastic contact can only take energy away, so a gain is the solver making it up (an
+  impossible inertia, too few substeps). Threshold: ``ENERGY_GAIN`` of the largest kinetic
+  energy of the bake, plus the energy of everything falling ``ENERGY_FLOOR_HEIGHT`` and
+  moving at ``ENERGY_FLOOR_SPEED`` (resting contacts' round-off, bodies that start a little
+  inside each other pushed apart); no threshold when the scene has a source.
+* ``unexplained_stop`` (m/s): the speed a dynamic body lost over a frame while nothing was
+  near it: it was going at least ``STOP_SPEED`` and lost more than half of that, and at the
+  end of the frame its bounding sphere is more than ``CLEAR_GAP`` from the ground, from every
+  other body's bounding sphere anywhere along that body's path over the frame, and from every
+  cloth's bounds. The scheme detects a collision at the step's end and changes the velocity at
+  its start, so a fast body with too few substeps stops in mid-air, short of what it hit.
+  Threshold: 0 (any such stop).
+* ``imparted_speed`` (m/s): how much faster the fastest dynamic body goes than anything in the
+  scene could make it without a keyed body: its speed less the largest speed at the start
+  (spin at the rim included) and what gravity adds in the time since, v - (v0 + |g| t).
+  Energy bounds this by 0 without a source; a keyed body can add up to twice its own speed.
+  Threshold: ``IMPARTED_SPEED`` (100 m/s, 360 km/h: beyond what a shot's keyed prop gives,
+  a sign of a key that jumps between frames).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ENERGY_GAIN = 0.1            # of the bake's largest kinetic energy
+ENERGY_FLOOR_HEIGHT = 0.01   # (m): everything falling 1 cm ...
+ENERGY_FLOOR_SPEED = 0.1     # (m/s) ... and moving at 0.1 m/s: the floor of the energy threshold
+STOP_SPEED = 1.0             # (m/s): slower bodies stop by friction and sleep
+CLEAR_GAP = 0.1              # (m) between bounding spheres (or to the ground, a cloth's bounds)
+IMPARTED_SPEED = 100.0       # (m/s)
+
+
+def _moving_kinematic(body) -> bool:
+    return body.kinematic and (bool(body.keys) or any(body.linear_velocity) or any(body.angular_velocity))
+
+
+def _segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of each point (n, 3) to each segment a_j b_j (m, 3): (n, m)."""
+    ab = b - a
+    length2 = np.einsum("ij,ij->i", ab, ab)
+    ap = points[:, None, :] - a[None, :, :]
+    t = np.clip(np.einsum("nmk,mk->nm", ap, ab) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    closest = a[None, :, :] + t[..., None] * ab[None, :, :]
+    return np.linalg.norm(points[:, None, :] - closest, axis=-1)
+
+
+class MotionFigures:
+    """Measures the three figures above frame by frame; `radii` (m) bound each body's mesh
+    about its mesh origin, `cloth_masses` are each cloth's lumped vertex masses (kg)."""
+
+    def __init__(self, scene, masses: np.ndarray, radii: np.ndarray, cloth_masses: list[np.ndarray]):
+        self.gravity = np.asarray(scene.gravity, dtype=np.float64)
+        self.ground = scene.ground.height if scene.ground is not None else None
+        self.dynamic = np.array([not b.kinematic for b in scene.bodies], dtype=bool)
+        self.has_source = any(_moving_kinematic(b) for b in scene.bodies)
+        self.masses, self.radii = np.asarray(masses, dtype=np.float64), np.asarray(radii, dtype=np.float64)
+        self.cloth_masses = cloth_masses
+        self.total_mass = float(self.masses[self.dynamic].sum() + sum(m.sum() for m in cloth_masses))
+        self.start_time = None
+        self.start_energy = None  # the baseline: at the start, or once a starting overlap is gone
+        self.start_speed = 0.0
+        self.largest_kinetic = 0.0
+        self._speeds = None       # each dynamic body's speed at the last frame (m/s)
+        self._origins = None      # every body's mesh origin at the last frame (m)
+
+    # -- state -------------------------------------------------------------------------------
+
+    def _rigid(self, world):
+        """Centres of mass, velocities and energies of the dynamic bodies now."""
+        states = [world.body_state(int(i)) for i in np.flatnonzero(self.dynamic)]
+        if not states:
+            return np.zeros((0, 3)), 0.0, 0.0, 0.0
+        x = np.array([s["center_of_mass"] for s in states])
+        v = np.array([s["linear_velocity"] for s in states])
+        w = np.array([s["angular_velocity"] for s in states])
+        spin = np.einsum("ij,ij->i", w, np.array([s["angular_momentum"] for s in states]))
+        m = self.masses[self.dynamic]
+        kinetic = float(0.5 * (m * np.einsum("ij,ij->i", v, v)).sum() + 0.5 * spin.sum())
+        potential = float(-(m * (x @ self.gravity)).sum())
+        rim = np.linalg.norm(w, axis=1) * self.radii[self.dynamic]
+        return v, kinetic, potential, float((np.linalg.norm(v, axis=1) + rim).max())
+
+    def _start_energy(self, world, kinetic: float, potential: float) -> float:
+        """The energy at the start, before any step (the core's statistics are not yet
+        gathered): the cloths rest in their rest shape, still."""
+        for k, masses in enumerate(self.cloth_masses):
+            points = np.asarray(world.cloth_state(k)[0])
+            potential -= float(masses @ (points @ self.gravity))
+        return kinetic + potential
+
+    # -- per frame ---------------------------------------------------------------------------
+
+    def record(self, world, time: float, origins: np.ndarray, overlapping: bool = False) -> dict:
+        """The figures of `world` at `time` (s); `origins` (bodies, 3) are the mesh origins;
+        `overlapping`: bodies are inside each other deeper than the penetration threshold."""
+        velocities, kinetic, potential, fastest = self._rigid(world)
+        speeds = np.linalg.norm(velocities, axis=1)
+        if self.start_time is None:
+            self.start_time = time
+            energy = self._start_energy(world, kinetic, potential)
+            self.start_speed = fastest
+        else:
+            stats = world.statistics()
+            energy = stats["kinetic_energy"] + stats["potential_energy"] + stats["elastic_energy"]
+            kinetic = stats["kinetic_energy"]
+        if self.start_energy is None and not overlapping:
+            self.start_energy = energy
+        self.largest_kinetic = max(self.largest_kinetic, kinetic)
+        stop, stopped = self._unexplained_stop(world, speeds, origins)
+        self._speeds, self._origins = speeds, np.array(origins, dtype=np.float64)
+        free = self.start_speed + float(np.linalg.norm(self.gravity)) * (time - self.start_time)
+        fastest = int(np.argmax(speeds)) if len(speeds) else -1
+        return {"energy_gain": max(0.0, energy - self.start_energy) if self.start_energy is not None else 0.0,
+                "unexplained_stop": stop, "stopped_body": stopped,
+                "imparted_speed": max(0.0, float(speeds.max(initial=0.0)) - free),
+                "fastest_body": int(np.flatnonzero(self.dynamic)[fastest]) if fastest >= 0 else -1}
+
+    def _unexplained_stop(self, world, speeds: np.ndarray, origins: np.ndarray) -> tuple[float, int]:
+        """(speed lost, body index) of the largest stop clear of everything, or (0, -1)."""
+        if self._speeds is None or not len(speeds):
+            return 0.0, -1
+        lost = self._speeds - speeds
+        stopped = np.flatnonzero((self._speeds >= STOP_SPEED) & (lost > 0.5 * self._speeds))
+        if not len(stopped):
+            return 0.0, -1
+        index = np.flatnonzero(self.dynamic)
+        worst, who = 0.0, -1
+        for k in stopped:
+            body = int(index[k])
+            if lost[k] > worst and self._clear(world, body, np.asarray(origins, dtype=np.float64)):
+                worst, who = float(lost[k]), body
+        return worst, who
+
+    def _clear(self, world, body: int, origins: np.ndarray) -> bool:
+        """Whether `body` ends the frame farther than CLEAR_GAP from everything it could touch."""
+        here, r = origins[body:body + 1], self.radii[body]
+        up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
+        if self.ground is not None and float(here[0] @ up) - r - self.ground <= CLEAR_GAP:
+            return False
+        others = np.array([j for j in range(len(origins)) if j != body], dtype=int)
+        if len(others):
+            gaps = _segment_distance(here, self._origins[others], origins[others])[0] - r - self.radii[others]
+            if gaps.min() <= CLEAR_GAP:
+                return False
+        for k in range(len(self.cloth_masses)):
+            points = np.asarray(world.cloth_state(k)[0])
+            outside = np.maximum(points.min(axis=0) - here[0], 0) + np.maximum(here[0] - points.max(axis=0), 0)
+            if np.linalg.norm(outside) - r <= CLEAR_GAP:
+                return False
+        return True
+
+    # -- thresholds --------------------------------------------------------------------------
+
+    def thresholds(self) -> dict[str, float | None]:
+        floor = self.total_mass * (float(np.linalg.norm(self.gravity)) * ENERGY_FLOOR_HEIGHT
+                                   + 0.5 * ENERGY_FLOOR_SPEED ** 2)
+        return {"energy_gain": None if self.has_source else ENERGY_GAIN * self.largest_kinetic + floor + 1e-9,
+                "unexplained_stop": 0.0,
+                "imparted_speed": IMPARTED_SPEED}
+
+
+def lumped_masses(vertices: np.ndarray, triangles: np.ndarray, area_density: float) -> np.ndarray:
+    """A cloth's vertex masses as the core lumps them: a third of each triangle's mass (kg)."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    third = area_density * 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1) / 3.0
+    masses = np.zeros(len(vertices))
+    for k in range(3):
+        np.add.at(masses, triangles[:, k], third)
+    return masses
+
+
+def mean_edge(vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """The mean length of a mesh's triangle edges (each counted once per triangle side) (m)."""
+    if not len(triangles):
+        return 0.0
+    p = vertices[triangles]
+    return float(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).mean())
+
+
+def bounding_radius(vertices: np.ndarray) -> float:
+    """The radius about the mesh origin that holds the whole mesh (m)."""
+    return float(np.linalg.norm(vertices, axis=1).max()) if len(vertices) else 0.0
+
