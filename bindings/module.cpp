@@ -381,6 +381,13 @@ PYBIND11_MODULE(_core, m) {
              d["self_collision_updates"] = s.self_collision.updates;
              d["self_collision_tests"] = s.self_collision.tests;
              d["self_collision_near_pairs"] = s.self_collision.near_pairs;
+             d["self_collision_over_budget"] = s.self_collision.over_budget;
+             d["impact_zone_yields"] = s.self_collision.yields;
+             d["cloth_let_in"] = s.self_collision.let_in;
+             d["cloth_gave"] = s.cloth_gave;
+             d["self_collision_candidate_peak"] = s.self_collision.candidate_peak;
+             d["self_collision_pass_peak"] = s.self_collision.pass_peak;
+             d["impact_zone_round_peak"] = s.self_collision.zone_round_peak;
              return d;
            })
       .def("quality", [](const World& w) {

@@ -368,6 +368,13 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
   Touches& touches = touches_;
   auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc,
                            const Vec3& normal, double phi, double mu) {
+    // a body passing through vertices the cloth let in does not push them (it would carry
+    // them with it, out of its nearest face, as it goes)
+    if (const std::vector<char>* let_in = body >= 0 ? bodies.body(body).let_in : nullptr) {
+      for (int i = 0; i < count; ++i) {
+        if ((*let_in)[ids[i]]) return;
+      }
+    }
     double denom = 0.0, weight = 0.0, lever = 0.0;
     Vec3 point_velocity = Vec3::Zero();
     for (int i = 0; i < count; ++i) {

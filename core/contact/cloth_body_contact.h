@@ -40,6 +40,9 @@ struct ContactBody {
   double inverse_mass = 0.0;              // (1/kg); 0 for kinematic bodies
   bool kinematic = false;
   bool still = false;                     // static, or kinematic and not moving this step
+  // (cloth vertices) or null: the vertices this body passes through this step, no contact
+  // pushing them out (a keyed obstacle the cloth has let in: contact/cloth_obstacles.h)
+  const std::vector<char>* let_in = nullptr;
 };
 
 // The ground plane y = height, as the contacts see it

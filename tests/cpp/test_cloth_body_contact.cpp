@@ -244,3 +244,27 @@ TEST(ClosestPoints, Segments) {
   EXPECT_EQ(s, 0.0);
   EXPECT_NEAR(t, 0.5, 1e-15);
 }
+
+// A body passing through vertices the cloth let in (ContactBody::let_in: a keyed obstacle
+// the cloth gave way to, contact/cloth_obstacles.h) does not push them: the vertex inside a
+// keyed sphere keeps its velocity; unflagged, the same vertex is pushed out to the thickness
+TEST(ClothBodyContact, ABodyPassesThroughTheVerticesLetIntoIt) {
+  const double h = 0.005, r = 0.5, dt = 0.01;
+  const SphereDistance shape(r);
+  for (const bool let_in : {false, true}) {
+    Cloth cloth = one_free_vertex(Vec3(0.0, r - 0.1, 0.0));  // 0.1 m inside, under the top
+    ClothBodyContact contact(cloth, 0.5, h);
+    PlainBodies bodies;
+    bodies.add(sphere(shape, r, Vec3::Zero(), 0.0), Mat3::Zero());
+    bodies.bodies[0].still = false;  // (keyed: moving, at rest within this step)
+    const std::vector<char> flags = {1, 0, 0};
+    if (let_in) bodies.bodies[0].let_in = &flags;
+    contact.collide(cloth, bodies, dt);
+    const Vec3 candidate = (cloth.positions().row(0) + dt * cloth.velocities().row(0)).transpose();
+    if (let_in) {
+      EXPECT_EQ(cloth.velocities().row(0).norm(), 0.0);
+    } else {
+      EXPECT_NEAR(candidate.norm() - r, h, 1e-12);
+    }
+  }
+}
