@@ -298,7 +298,7 @@ double World::body_travel_steps(double frame_dt, double thinnest) const {
   return steps;
 }
 
-int World::step_frame(double frame_dt, int substeps) {
+int World::step_frame(double frame_dt, int substeps, const std::function<bool()>& stop) {
   require(frame_dt > 0.0 && std::isfinite(frame_dt), "frame_dt must be > 0");
   // the cloths step once every `group` substeps, over the group's time (a fixed substep
   // count steps them every substep)
@@ -308,8 +308,17 @@ int World::step_frame(double frame_dt, int substeps) {
   const int cloth_steps = std::min(schedule.cloth_steps, n);
   const int group = n % cloth_steps == 0 ? n / cloth_steps : 1;
   tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
+  bool stopped = false;
+  int taken = n;
   arena.execute([&] {
     for (int k = 0; k < n && stats_.finite; ++k) {
+      // (asked between substeps: a signal ends a long frame within a substep; the state
+      // after each substep is the same whether or not anyone asks)
+      if (k > 0 && stop && stop()) {
+        stopped = true;
+        taken = k;
+        break;
+      }
       if (k % group == 0) begin_cloth_step();
       step_bodies(dt);
       if ((k + 1) % group == 0) {
@@ -320,6 +329,7 @@ int World::step_frame(double frame_dt, int substeps) {
       if (!check_finite()) stats_.finite = false;
     }
   });
+  if (stopped) return taken;
   {
     ScopedTimer timer(profile_.statistics);
     arena.execute([&] { gather_statistics(); });

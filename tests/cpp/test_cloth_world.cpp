@@ -6,6 +6,8 @@
 #include "test_support.h"
 #include "world/quality.h"
 
+#include <memory>
+
 using namespace simbake;
 using namespace simbake::test;
 
@@ -414,4 +416,34 @@ TEST(ClothWorld, AKeyedBoxPloughingASheetNeverPokesThroughIt) {
               crossed_frames, deep_frames, layered_frames);
   // it did plough: the sheet's vertices were pushed on ahead of the box
   EXPECT_GT(world.cloth(0).positions().col(0).maxCoeff(), 0.55);
+}
+
+// step_frame's `stop` (the bindings' signal check) is asked between substeps and changes
+// nothing else: a frame of 8 substeps stopped at its third ask is the world after three
+// substeps (World::step each), bit for bit; one never stopped is the frame without a stop
+TEST(ClothWorld, AFrameStoppedBetweenSubstepsIsTheSubstepsItTook) {
+  const auto make = [] {
+    auto world = std::make_unique<World>();
+    world->set_ground(GroundDef{0.0, 0.5, 0.0});
+    BodyDesc ball = sphere_body(0.3, 1.0, Vec3(0.0, 0.3, 0.0));
+    ball.kinematic = true;
+    world->add_body(ball);
+    world->add_cloth(square_cloth(1.0, 12, Vec3(0.0, 0.65, 0.0)), 0.4, 0.005);
+    for (int f = 0; f < 6; ++f) world->step_frame(1.0 / 24.0);  // the cloth on the ball
+    return world;
+  };
+  const double frame = 1.0 / 24.0;
+  auto stopped = make(), stepped = make(), asked = make(), plain = make();
+  int asks = 0;
+  EXPECT_EQ(stopped->step_frame(frame, 8, [&] { return ++asks == 3; }), 3);
+  EXPECT_EQ(asks, 3);
+  for (int k = 0; k < 3; ++k) stepped->step(frame / 8);
+  EXPECT_TRUE(stopped->cloth(0).positions() == stepped->cloth(0).positions());
+  EXPECT_TRUE(stopped->cloth(0).velocities() == stepped->cloth(0).velocities());
+  EXPECT_EQ(stopped->time(), stepped->time());
+  asks = 0;
+  EXPECT_EQ(asked->step_frame(frame, 0, [&] { ++asks; return false; }), plain->step_frame(frame, 0));
+  EXPECT_GT(asks, 0);
+  EXPECT_TRUE(asked->cloth(0).positions() == plain->cloth(0).positions());
+  EXPECT_EQ(asked->statistics().cloth_steps, plain->statistics().cloth_steps);
 }
