@@ -40,8 +40,9 @@ struct ContactBody {
   double inverse_mass = 0.0;              // (1/kg); 0 for kinematic bodies
   bool kinematic = false;
   bool still = false;                     // static, or kinematic and not moving this step
-  // (cloth vertices) or null: the vertices this body passes through this step, no contact
-  // pushing them out (a keyed obstacle the cloth has let in: contact/cloth_obstacles.h)
+  // (cloth vertices) or null: the vertices this body, kinematic and moving, passes through
+  // this step, no contact pushing them out (a keyed obstacle the cloth has let in:
+  // contact/cloth_obstacles.h); it passes through those inside it at the step's start too
   const std::vector<char>* let_in = nullptr;
 };
 

@@ -65,6 +65,7 @@ void ClothObstacles::begin_step(const Cloth& cloth, const ContactBodies& bodies,
     near.min().array() -= give;
     near.max().array() += give;
     for (int k = 0; k < cloth_vertices_; ++k) {
+      if (!(inverse_mass_[k] > 0.0)) continue;  // pinned: never moves (the flag's pins are inside its pole)
       const Vec3 p = body.start_pose.apply_inverse(Vec3(x_.row(k).transpose()));
       if (!near.contains(p)) continue;
       const double phi = body.shape->phi(p);

@@ -51,7 +51,7 @@ class ClothObstacles {
   Points& velocities() { return v_; }
   const Eigen::VectorXd& inverse_mass() const { return inverse_mass_; }
   const std::vector<ObstacleMotion>& motions() const { return motion_; }
-  // (n) 1 for the cloth's vertices that no obstacle keeps out in this step
+  // (n) 1 for the cloth's free vertices that no obstacle keeps out in this step
   // (SelfCollisionSettings::yielding): those inside one at the step's start, and, when the
   // cloth gives, those within `give` of one. A keyed box pushing a cloth held
   // by its pins carries it along (the obstacles' continuous test and impact zones keep the

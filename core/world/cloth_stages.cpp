@@ -27,7 +27,7 @@ constexpr int kFinalRounds = 4;            // strain limiting and self-collision
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
 constexpr int kZoneRounds = 3;             // impact zones, then strain limiting around them, in turn (at most)
 // A cloth stretched past this many times its strain limit gives way to the kinematic
-// obstacles: the vertices within twice its thickness of one are no longer kept out of it
+// obstacles: the vertices within an edge (at least twice its thickness) of one are no longer kept out of it
 // (contact/cloth_obstacles.h, yielding). A keyed box pushing a cloth held by its pins (or a
 // heavier part of itself) otherwise carries it along without end: the strain limiter cannot
 // shorten the edges from the pins to the box, each of its global passes then runs to its
@@ -147,7 +147,10 @@ void World::step_cloths(double dt) {
     if (self) self->begin_step();  // the step's self-collision budgets start again
     const bool joined = self && !obstacles.empty();
     if (joined) {
-      obstacles.begin_step(cloth, bodies, inverse_mass, dt, give ? 2.0 * contact.thickness() : 0.0);
+      // (giving, the vertices within an edge of an obstacle: a coarse cloth meets a box's
+      // face and edges inside its triangles, its vertices an edge away)
+      const double reach = std::max(2.0 * contact.thickness(), contact.mean_edge());
+      obstacles.begin_step(cloth, bodies, inverse_mass, dt, give ? reach : 0.0);
       self_settings.obstacle_motion = &obstacles.motions();
       if (obstacles.any_yielding()) {
         // the vertices let in: self-collision no longer keeps them out of the obstacles, and a

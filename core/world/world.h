@@ -237,7 +237,8 @@ class World {
   };
   FrameSchedule frame_schedule(double frame_dt) const;
   double thinnest_body() const;                                      // (m), infinite with no body
-  double body_travel_steps(double frame_dt, double thinnest) const;  // steps that keep each body's travel short
+  // steps that keep each body's travel short (with `reach`: kinematic bodies only near that box)
+  double body_travel_steps(double frame_dt, double thinnest, const Box3* reach = nullptr, double reach_speed = 0.0) const;
   // the speed (m/s) of body i's fastest point over the next frame: its velocities now or, for a
   // keyed body, its track's travel over the frame; gravity's gain over the frame for a dynamic body
   double body_speed(int i, double frame_dt) const;

@@ -245,26 +245,35 @@ TEST(ClosestPoints, Segments) {
   EXPECT_NEAR(t, 0.5, 1e-15);
 }
 
-// A body passing through vertices the cloth let in (ContactBody::let_in: a keyed obstacle
-// the cloth gave way to, contact/cloth_obstacles.h) does not push them: the vertex inside a
-// keyed sphere keeps its velocity; unflagged, the same vertex is pushed out to the thickness
-TEST(ClothBodyContact, ABodyPassesThroughTheVerticesLetIntoIt) {
+// A moving keyed body passes through the vertices the cloth let into it (ContactBody::let_in:
+// a keyed obstacle the cloth gave way to, contact/cloth_obstacles.h) and those that were
+// inside it at the step's start (something it cannot move held them there): neither is
+// pushed. A vertex outside it that the step would take 0.1 m inside is pushed out to the
+// thickness, and so is one inside a still body (a static body pushes what is inside it out)
+TEST(ClothBodyContact, AMovingKeyedBodyPassesThroughTheVerticesLetIntoIt) {
   const double h = 0.005, r = 0.5, dt = 0.01;
   const SphereDistance shape(r);
-  for (const bool let_in : {false, true}) {
-    Cloth cloth = one_free_vertex(Vec3(0.0, r - 0.1, 0.0));  // 0.1 m inside, under the top
+  const std::vector<char> flags = {1, 0, 0};
+  struct Case {
+    double start;  // the vertex's height over the sphere's centre (at rest)
+    double speed;  // its velocity, down (m/s)
+    bool moving, let_in, pushed;
+  };
+  for (const Case& c : {Case{r + 0.01, 11.0, true, false, true}, Case{r + 0.01, 11.0, true, true, false},
+                        Case{r - 0.1, 0.0, true, false, false}, Case{r - 0.1, 0.0, false, false, true}}) {
+    Cloth cloth = one_free_vertex(Vec3(0.0, c.start, 0.0));
+    cloth.velocities()(0, 1) = -c.speed;
     ClothBodyContact contact(cloth, 0.5, h);
     PlainBodies bodies;
     bodies.add(sphere(shape, r, Vec3::Zero(), 0.0), Mat3::Zero());
-    bodies.bodies[0].still = false;  // (keyed: moving, at rest within this step)
-    const std::vector<char> flags = {1, 0, 0};
-    if (let_in) bodies.bodies[0].let_in = &flags;
+    bodies.bodies[0].still = !c.moving;  // (keyed and moving, at rest within this step's test)
+    if (c.let_in) bodies.bodies[0].let_in = &flags;
     contact.collide(cloth, bodies, dt);
     const Vec3 candidate = (cloth.positions().row(0) + dt * cloth.velocities().row(0)).transpose();
-    if (let_in) {
-      EXPECT_EQ(cloth.velocities().row(0).norm(), 0.0);
+    if (c.pushed) {
+      EXPECT_NEAR(candidate.norm() - r, h, 1e-12) << c.start << " " << c.moving;
     } else {
-      EXPECT_NEAR(candidate.norm() - r, h, 1e-12);
+      EXPECT_EQ(cloth.velocities()(0, 1), -c.speed) << c.start << " " << c.let_in;
     }
   }
 }

@@ -447,3 +447,27 @@ TEST(ClothWorld, AFrameStoppedBetweenSubstepsIsTheSubstepsItTook) {
   EXPECT_TRUE(asked->cloth(0).positions() == plain->cloth(0).positions());
   EXPECT_EQ(asked->statistics().cloth_steps, plain->statistics().cloth_steps);
 }
+
+// A keyed body far from the cloth asks it for no steps of its own when no dynamic body can
+// meet it (it passes through the ground and other kinematic bodies): a sphere keyed down at
+// 1 km/s 100 m away leaves the cloth at its 5 steps a frame (the bodies still take their 695
+// substeps, which cost nothing). With a dynamic body in the scene its travel counts as before.
+// Counted, a keyed body at 1 km/s held the cloth at 695 steps a frame long after it had gone
+// through it (benchmarks/stress/cloth_press.py)
+TEST(ClothWorld, AKeyedBodyFarFromTheClothAsksItForNoSteps) {
+  const double frame = 1.0 / 24.0;
+  for (const bool dynamic : {false, true}) {
+    World world;
+    BodyDesc ball = sphere_body(0.15, 1.0, Vec3(100.0, 0.0, 0.0));
+    ball.kinematic = true;
+    const int b = world.add_body(ball);
+    world.set_kinematic_track(b, KinematicTrack({0.0, 1.0}, {Vec3(100.0, 0.0, 0.0), Vec3(100.0, -1000.0, 0.0)},
+                                                {Quat::Identity(), Quat::Identity()}));
+    world.add_cloth(square_cloth(1.0, 17, Vec3::Zero()), 0.4, 0.005);
+    if (dynamic) world.add_body(sphere_body(0.15, 1.0, Vec3(-50.0, 0.0, 0.0)));
+    const int travel = static_cast<int>(std::ceil(1000.0 * frame / (0.2 * 0.3)));
+    EXPECT_EQ(travel, 695);
+    EXPECT_EQ(world.automatic_cloth_steps(frame), dynamic ? travel : 5) << dynamic;
+    EXPECT_GE(world.automatic_substeps(frame), travel) << dynamic;
+  }
+}
