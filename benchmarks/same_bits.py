@@ -86,6 +86,8 @@ def first_difference(path_a: Path, path_b: Path) -> str | None:
         if path == Sdf.Path.absoluteRootPath:
             continue
         spec_a, spec_b = a.GetObjectAtPath(path), b.GetObjectAtPath(path)
+        if spec_a is None and spec_b is None:
+            continue  # a relationship's target path (a Volume's field): no spec of its own
         keys = sorted(set(spec_a.ListInfoKeys()) | set(spec_b.ListInfoKeys()))
         for key in keys:
             if key == "timeSamples":

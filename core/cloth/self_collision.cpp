@@ -1233,10 +1233,11 @@ bool move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
     // An obstacle that would carry a vertex of the zone into the still surface it rests on (a
     // keyed box pressing the cloth into the ground) cannot be followed: the cloth cannot be in
     // two places. The surface holds the zone, as a pin would, and the obstacle passes through
-    // the cloth there (the body contacts push the vertices out of it again once it has gone
-    // by). Followed, the zone went under the ground with the box, the edges from it to the
-    // cloth the ground held stretched by the box's travel every step (strain 5.3 after 0.16 s
-    // at 1 m/s), and the candidate pairs, the searches and the step's work with them doubled
+    // the cloth there (from the next step on, its contacts and self-collision leave the
+    // vertices inside it alone: cloth_body_contact.cpp, SelfCollisionSettings::yielding).
+    // Followed, the zone went under the ground with the box, the edges from it to the cloth
+    // the ground held stretched by the box's travel every step (strain 5.3 after 0.16 s at
+    // 1 m/s), and the candidate pairs, the searches and the step's work with them doubled
     // every frame until the cloth blew up (issue 30; benchmarks/stress/cloth_press.py)
     bool yields = false;
     for (int i : zone) {

@@ -42,7 +42,8 @@ struct ContactBody {
   bool still = false;                     // static, or kinematic and not moving this step
   // (cloth vertices) or null: the vertices this body, kinematic and moving, passes through
   // this step, no contact pushing them out (a keyed obstacle the cloth has let in:
-  // contact/cloth_obstacles.h); it passes through those inside it at the step's start too
+  // contact/cloth_obstacles.h); it passes through those inside it at the step's start that a
+  // still surface holds, too
   const std::vector<char>* let_in = nullptr;
 };
 
