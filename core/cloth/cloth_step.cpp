@@ -23,6 +23,15 @@ constexpr double kFinalSlack = 0.002;      // the end-of-step rounds: done once 
 constexpr int kFinalRounds = 4;            // strain limiting and self-collision in turn at the end (at most)
 constexpr int kSelfCollisionPasses = 3;    // of those passes, the first ones that also collide the cloth with itself
 constexpr int kZoneRounds = 3;             // impact zones, then strain limiting around them, in turn (at most)
+// A cloth stretched past this many times its strain limit gives way to the kinematic
+// obstacles: the vertices within an edge (at least twice its thickness) of one are no longer
+// kept out of it (contact/cloth_obstacles.h, yielding). A keyed box pushing a cloth held by
+// its pins (or a heavier part of itself) would otherwise carry it along without end: the
+// strain limiter cannot shorten the edges from the pins to the box, and each of its global
+// passes runs to its iteration cap. Shipped scenes stay within 1% of their limit. Past it,
+// the global passes cannot bring the cloth back within a step either (what holds it there
+// holds it): the rest of the step limits strain by the Gauss-Seidel sweeps alone
+constexpr double kGiveStrain = 3.0;
 
 // The sub-stages of one cloth's step, each timed into its own profile entry
 class ClothStep {
@@ -35,17 +44,36 @@ class ClothStep {
     self_settings_.thickness = contact_.thickness();
     self_settings_.friction = contact_.friction();
     self_settings_.support = &contact_.support();
+    // a cloth past kGiveStrain x its limit at the step's start gives (the obstacles let it in,
+    // below) and is limited by sweeps alone for the step
+    sweeps_only_ = past_give(cloth_.max_strain());
+    const bool give = sweeps_only_;
     // the kinematic boxes and meshes join self-collision as obstacles (contact/cloth_obstacles.h):
     // its calls then see the cloth's vertices and the obstacles' in one set of arrays
     if (self_ && obstacles_.select(bodies_)) self_.emplace(cloth_.triangles(), cloth_.vertex_count(), obstacles_.meshes());
+    if (self_) self_->begin_step();  // the step's self-collision budgets start again
     joined_ = self_ && !obstacles_.empty();
     if (joined_) {
-      obstacles_.begin_step(cloth_, bodies_, contact_.inverse_mass(), dt_);
+      // (giving, the vertices within an edge of an obstacle: a coarse cloth meets a box's
+      // face and edges inside its triangles, its vertices an edge away)
+      const double reach = std::max(2.0 * contact_.thickness(), contact_.mean_edge());
+      obstacles_.begin_step(cloth_, bodies_, contact_.inverse_mass(), dt_, give ? reach : 0.0);
       self_settings_.obstacle_motion = &obstacles_.motions();
+      if (obstacles_.any_yielding()) {
+        // the vertices let in: self-collision no longer keeps them out of the obstacles, and a
+        // moving obstacle's contacts no longer push them (it passes through them)
+        self_settings_.yielding = &obstacles_.yielding();
+        ++stats_.let_in;
+        for (int b : obstacles_.bodies()) {
+          if (!bodies_.body(b).still) bodies_.set_let_in(b, &obstacles_.yielding());
+        }
+      }
     }
   }
 
   bool self_collision() const { return self_.has_value(); }
+  // whether the cloth gave this step (stretched past kGiveStrain x its limit)
+  bool gave() const { return sweeps_only_; }
 
   // internal forces and the velocity update, holding the contacts resting on still surfaces;
   // the contacts the solve holds, and their friction after it, are contacts' time
@@ -74,9 +102,11 @@ class ClothStep {
     contact_.collide(cloth_, bodies_, dt_);
   }
 
+  // (a global pass that leaves the cloth past kGiveStrain x its limit: sweeps alone from then on)
   void limit_strain(bool global) {
     StageTimer timer(profile_, Stage::kClothStrain);
-    cloth_.limit_strain(dt_, global);
+    cloth_.limit_strain(dt_, global && !sweeps_only_);
+    if (global && !sweeps_only_ && past_give(cloth_.candidate_strain(dt_))) sweeps_only_ = true;
   }
 
   // self-collision's repulsions between layers closer than the thickness
@@ -152,9 +182,17 @@ class ClothStep {
       });
       if (!over_limit()) break;
       if (round + 1 == kZoneRounds) break;
-      push_zones();
+      if (!sweeps_only_) push_zones();
       clear = collide_self(1);
     }
+  }
+
+  // a step whose self-collision ran out of a budget (SelfCollisionSettings: candidate pairs,
+  // pairs visited) is not known to be free of crossings: the cloth holds still for it, as
+  // when the impact zones do not settle, and stays free of them (counted in the statistics,
+  // and the QA warns)
+  void hold_still_if_over_budget() {
+    if (self_ && self_->over_budget()) cloth_.velocities().setZero();
   }
 
   void hold_pinched_bodies() {
@@ -166,6 +204,7 @@ class ClothStep {
 
  private:
   bool over_limit() const { return limit_ > 0.0 && cloth_.candidate_strain(dt_) > limit_ * (1.0 + kFinalSlack); }
+  bool past_give(double strain) const { return limit_ > 0.0 && strain > kGiveStrain * limit_; }
 
   // the edges around the zones limited with the zones held still, and the zones taking the
   // pushes of those edges as rigid bodies, so that momentum is kept (held still, they would
@@ -208,20 +247,25 @@ class ClothStep {
   const double limit_;                   // the cloth's strain limit (0: none)
   SelfCollisionSettings self_settings_;
   bool joined_ = false;                  // the obstacles joined self-collision this step
+  bool sweeps_only_ = false;             // the cloth gave: strain limited by sweeps alone
 };
 
 }  // namespace
 
-void step_cloth(SteppedCloth& cloth, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
+bool step_cloth(SteppedCloth& cloth, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
                 StageProfile& profile, SelfCollisionStatistics& stats) {
   ClothStep step(cloth, bodies, dt, settings, profile, stats);
   step.update_velocities();
   step.collide_with_bodies();
   if (step.self_collision()) step.repel();
   step.strain_and_collision_passes();
-  if (step.self_collision()) step.impact_zone_rounds(step.self_collision_rounds());
+  if (step.self_collision()) {
+    step.impact_zone_rounds(step.self_collision_rounds());
+    step.hold_still_if_over_budget();
+  }
   step.hold_pinched_bodies();
   step.update_positions();
+  return step.gave();
 }
 
 }  // namespace simbake

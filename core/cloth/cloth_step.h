@@ -33,8 +33,9 @@ struct ClothStepSettings {
 
 // One step of dt (s) of the cloth against the bodies (contact/contact_bodies.h: what the
 // contacts do to the bodies is recorded there, for the world to apply), each sub-stage timed
-// into `profile`, self-collision's work counted into `stats`
-void step_cloth(SteppedCloth& cloth, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
+// into `profile`, self-collision's work counted into `stats`. True when the cloth gave way
+// this step (stretched past what its strain limit can hold: cloth_step.cpp, kGiveStrain)
+bool step_cloth(SteppedCloth& cloth, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
                 StageProfile& profile, SelfCollisionStatistics& stats);
 
 }  // namespace simbake

@@ -112,9 +112,20 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
       c.frame_step[a] = std::isfinite(motion[motion.size() / 2]) ? motion[motion.size() / 2] : 0.0;
     }
   }
+  if (new_step) pass_work_ = 0;  // (a caller that holds the cloth still calls begin_step)
+  // the candidate budget: the searches stop past it, and a set over it is let go
+  pair_limit_ = static_cast<long long>(
+      std::min(settings.candidate_budget * std::max(vertex_count_, settings.budget_vertices), 4e18));
   bound_normals(x, v, dt, new_step);
   if (!update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats)) check_flat(x, v, dt, stats);
   activate_near(new_step, stats);
+  const long long held = static_cast<long long>(c.pairs[0].size() + c.pairs[1].size() + near_.pairs[0].size() +
+                                                near_.pairs[1].size());
+  stats.candidate_peak = std::max(stats.candidate_peak, held);
+  if (held > pair_limit_) {
+    stop_over_budget(stats);
+    return s;
+  }
   if (new_step || s.h != h) {
     // every pair measured again (in the same pass over the pairs that measures them)
     s.x = x;
@@ -168,10 +179,30 @@ void SelfCollision::measure(const Points& x, double h, bool all) {
 
 void SelfCollision::resolve(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                             const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
+  begin_step();
   repel(x, v, inverse_mass, dt, settings, stats);
   if (!collide(x, v, inverse_mass, dt, settings, stats, settings.collision_passes)) {
     impact_zones(x, v, inverse_mass, dt, settings, stats);
   }
+}
+
+void SelfCollision::begin_step() {
+  pass_work_ = 0;
+  over_budget_ = false;
+}
+
+void SelfCollision::stop_over_budget(SelfCollisionStatistics& stats) {
+  over_budget_ = true;
+  ++stats.over_budget;
+  // the candidates let go (all found again at the next step: the set over the budget, or cut
+  // short, is no good to keep), and the step's start forgotten
+  for (auto& pairs : candidates_.pairs) std::vector<Pair>().swap(pairs);
+  for (auto& pairs : near_.pairs) pairs.clear();
+  std::fill(near_.active.begin(), near_.active.end(), 0);
+  candidates_.pad = -1.0;
+  start_.x.resize(0, 3);
+  start_.proximity.clear();
+  start_.measured = false;
 }
 
 }  // namespace simbake

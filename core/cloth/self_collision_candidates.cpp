@@ -6,6 +6,7 @@
 
 #include "cloth/self_collision_detail.h"
 
+#include <atomic>
 #include <cmath>
 #include <numeric>
 
@@ -205,6 +206,7 @@ void SelfCollision::self_pairs(int n, const Points& x, const Points& v, double d
                                std::array<std::vector<Pair>, 2>& out) {
   Tree& tree = trees_[0];
   const PatchTree::Node& node = tree.tree.nodes()[n];
+  if (full(out)) return;  // over the candidate budget: the search stops (start sees it)
   if (tree.tree.flat(n, normals_.normal, normals_.largest, x, v, dt)) {
     std::fill(tree.cull.begin() + node.leaf_begin, tree.cull.begin() + node.leaf_end, n);
     return;
@@ -220,7 +222,7 @@ void SelfCollision::self_pairs(int n, const Points& x, const Points& v, double d
 
 void SelfCollision::cross_pairs(int i, int a, int j, int b, std::array<std::vector<Pair>, 2>& out) const {
   const PatchTree::Node &na = trees_[i].tree.nodes()[a], &nb = trees_[j].tree.nodes()[b];
-  if (!na.box.intersects(nb.box)) return;
+  if (!na.box.intersects(nb.box) || full(out)) return;
   if (na.leaf() && nb.leaf()) {
     leaf_pairs(i, na.leaf_begin, j, nb.leaf_begin, out);
   } else if (na.leaf() || (!nb.leaf() && nb.end - nb.begin > na.end - na.begin)) {
@@ -323,12 +325,22 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
       query(trees_[i].tree, box, skipped(home, i), [&](int leaf) { visit(trees_[i], leaf); });
     }
   };
+  // the candidate budget: past it, the items add no more pairs (start then lets the set go;
+  // whichever items ran before is of no matter: the set is over the budget at any thread count)
+  std::atomic<long long> held{static_cast<long long>(kept)};
+  const auto over = [&] { return held.load(std::memory_order_relaxed) > pair_limit_; };
+  const auto tally = [&](size_t added) { held.fetch_add(static_cast<long long>(added), std::memory_order_relaxed); };
   // moved points against every triangle; touched triangles against the points that did not move
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
+    if (over()) return;
+    const size_t before = out.size();
     const int k = moved[i];
     leaves_near(c.point_boxes[k], point_home_[k], [&](const Tree& tree, int leaf) { point_against_leaf(k, tree, leaf, out); });
+    tally(out.size() - before);
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
+    if (over()) return;
+    const size_t before = out.size();
     const int t = triangles[i];
     const auto offer = [&](int k) {
       if (!moving[k] && c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
@@ -339,9 +351,12 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
       for (int m = tree.point_first[leaf]; m < tree.point_first[leaf + 1]; ++m) offer(tree.points[m]);
     });
     for (int k : orphans_) offer(k);
+    tally(out.size() - before);
   });
   // touched edges against every edge (a pair of two touched edges once)
   parallel_collect(edges.size(), c.pairs[1], [&](size_t i, std::vector<Pair>& out) {
+    if (over()) return;
+    const size_t before = out.size();
     const int e = edges[i];
     leaves_near(c.edge_boxes[e], edge_home_[e], [&](const Tree& tree, int leaf) {
       for (int m = tree.edge_first[leaf]; m < tree.edge_first[leaf + 1]; ++m) {
@@ -350,6 +365,7 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
         out.push_back(edge_pair(e, f));
       }
     });
+    tally(out.size() - before);
   });
   start_.measured = false;
   ++stats.updates;

@@ -185,7 +185,19 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
                                        const SelfCollisionSettings& settings, std::vector<Contact>& out,
                                        SelfCollisionStatistics& stats) {
   out.clear();
+  if (over_budget_) return;
   start(x, v, dt, settings, stats);
+  if (over_budget_) return;
+  // the pass budget: the pairs this pass visits, with the step's earlier passes'
+  long long visits = 0;
+  for (int list = 0; list < 4; ++list) visits += static_cast<long long>(pair_list(list).size());
+  const double pass_limit = settings.pass_budget * std::max(vertex_count_, settings.budget_vertices);
+  if (static_cast<double>(pass_work_ + visits) > pass_limit) {
+    stop_over_budget(stats);
+    return;
+  }
+  pass_work_ += visits;
+  stats.pass_peak = std::max(stats.pass_peak, pass_work_);
   const double tolerance = collision_tolerance(settings);
   // this pass, and the vertices whose velocities changed since the last
   Passes& m = passes_;
@@ -204,10 +216,21 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
     }
   }
   std::atomic<long long> tests{0};
+  // an obstacle against a cloth item with a vertex it has let in (settings.yielding): not kept apart
+  const std::vector<char>* yielding = settings.yielding;
+  const auto let_through = [&](const std::array<int, 4>& ids) {
+    bool obstacle_side = false, let_in = false;
+    for (int k = 0; k < 4; ++k) {
+      obstacle_side = obstacle_side || obstacle(ids[k]);
+      let_in = let_in || (!obstacle(ids[k]) && (*yielding)[ids[k]]);
+    }
+    return obstacle_side && let_in;
+  };
   for (int list = 0; list < 4; ++list) {
     const int kind = list % 2;
     std::vector<Pair>& pairs = pair_list(list);
     parallel_collect(pairs.size(), out, [&](size_t n, std::vector<Contact>& found) {
+      if (yielding && let_through(pairs[n].vertex)) return;
       if (earliest_contact(kind, pairs[n], x, v, dt, tolerance, found)) tests.fetch_add(1, std::memory_order_relaxed);
     });
   }
@@ -224,6 +247,7 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
   std::vector<Contact> contacts;
   for (int pass = 0; pass < passes; ++pass) {
     collision_contacts(x, v, dt, settings, contacts, stats);
+    if (over_budget_) return false;
     if (contacts.empty()) return true;
     for (const Contact& c : contacts) {
       stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass, settings.support);

@@ -20,11 +20,13 @@ namespace {
 // zone holding vertices of infinite mass moves as they do: those of one obstacle (obstacle_of
 // >= 0) give the zone that obstacle's motion (motions[obstacle]), which carries the zone and
 // the obstacle by one invertible affine map, so that nothing in the zone passes through the
-// obstacle; a pinned cloth vertex, or two obstacles, hold the zone still. Vertices of
-// infinite mass keep their own velocities.
-void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
+// obstacle; a pinned cloth vertex, or two obstacles, hold the zone still, and so does the
+// surface under it where the obstacle would carry one of its vertices into that surface
+// faster than `sink` (m/s): the obstacle then passes through the cloth (returns true).
+// Vertices of infinite mass keep their own velocities.
+bool move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                   const Points* impulse, const std::vector<int>& obstacle_of, int cloth_vertices,
-                  const std::vector<ObstacleMotion>* motions, const std::vector<Vec3>* support) {
+                  const std::vector<ObstacleMotion>* motions, const std::vector<Vec3>* support, double sink) {
   int held_by = -1;       // the obstacle the zone holds, if one
   bool still = false;     // a pinned vertex, or two obstacles
   for (int i : zone) {
@@ -35,12 +37,26 @@ void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
   }
   if (still || held_by >= 0) {
     const ObstacleMotion* motion = still ? nullptr : &(*motions)[held_by];
+    // An obstacle that would carry a vertex of the zone into the still surface it rests on (a
+    // keyed box pressing the cloth into the ground) cannot be followed: the cloth cannot be in
+    // two places. The surface holds the zone, as a pin would, and the obstacle passes through
+    // the cloth there (from the next step on, its contacts and self-collision leave the
+    // vertices inside it alone: cloth_body_contact.cpp, SelfCollisionSettings::yielding).
+    // Followed, the zone would go under the ground with the box, the edges from it to the
+    // cloth the ground holds would stretch by the box's travel every step, and the candidate
+    // pairs and the step's work with them would grow without bound
+    bool yields = false;
+    for (int i : zone) {
+      if (!motion || !support || inverse_mass[i] <= 0.0 || !((*support)[i].squaredNorm() > 0.0)) continue;
+      yields = yields || Vec3(motion->A * row(x, i) + motion->c).dot((*support)[i].normalized()) < -sink;
+    }
+    if (yields) motion = nullptr;
     for (int i : zone) {
       if (inverse_mass[i] <= 0.0) continue;
       const Vec3 velocity = motion ? Vec3(motion->A * row(x, i) + motion->c) : Vec3::Zero();
       v.row(i) = velocity.transpose();
     }
-    return;
+    return yields;
   }
   double mass = 0.0;
   Vec3 center = Vec3::Zero(), momentum = Vec3::Zero();
@@ -72,6 +88,7 @@ void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
     for (int i : zone) into_support = into_support || rigid(i).dot((*support)[i]) < 0.0;
   }
   for (int i : zone) v.row(i) = (into_support ? Vec3::Zero() : rigid(i)).transpose();
+  return false;
 }
 
 }  // namespace
@@ -89,8 +106,14 @@ std::vector<std::vector<int>> SelfCollision::zone_members() const {
 
 void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                                const SelfCollisionSettings& settings, const Points& impulse) const {
+  if (over_budget_) return;
+  // (the zones that gave way to an obstacle in impact_zones give way again: the same step)
+  const double sink = collision_tolerance(settings) / passes_.dt;
   for (const std::vector<int>& zone : zone_members()) {
-    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support);
+    if (!zone.empty()) {
+      move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion,
+                   settings.support, sink);
+    }
   }
 }
 
@@ -102,7 +125,11 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
   parent.resize(vertex_count_);
   std::iota(parent.begin(), parent.end(), 0);
   in_zone_.assign(vertex_count_, 0);
+  if (over_budget_) return;
   std::vector<char>& in_zone = in_zone_;
+  // an obstacle carrying a zone into the surface under it more than the collision tolerance
+  // over the step gives way (move_rigidly)
+  const double sink = collision_tolerance(settings) / dt;
   const auto find = [&](int i) {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
     return i;
@@ -124,6 +151,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     outside_zones(contacts);
     if (contacts.empty()) return;
     ++stats.zone_rounds;
+    stats.zone_round_peak = std::max<long long>(stats.zone_round_peak, round + 1);
     for (const Contact& c : contacts) {
       for (int k = 0; k < 4; ++k) {
         in_zone[c.vertex[k]] = 1;
@@ -135,12 +163,14 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     for (const std::vector<int>& zone : zone_members()) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
-      move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support);
+      stats.yields += move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_,
+                                   settings.obstacle_motion, settings.support, sink);
     }
   }
   // the last resort: the cloth does not move, and a cloth free of crossings stays free of them
   // (unless a moving obstacle runs into it: obstacles move as they must)
   collision_contacts(x, v, dt, settings, contacts, stats);
+  if (over_budget_) return;  // (the caller holds the cloth still)
   outside_zones(contacts);
   if (contacts.empty()) return;
   ++stats.stills;

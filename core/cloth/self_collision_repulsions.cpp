@@ -70,8 +70,9 @@ Vec3 relative_velocity(const SelfCollision::Contact& c, const Points& v) {
 void SelfCollision::repel(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                           const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
   const double h = settings.thickness;
-  if (!(h > 0.0)) return;
+  if (!(h > 0.0) || over_budget_) return;
   const std::vector<Contact>& contacts = start(x, v, dt, settings, stats).proximity;
+  if (over_budget_) return;
   // pairs in touch: the normal across both sides, turned against their approach now (before
   // any of this pass's impulses)
   std::vector<std::pair<size_t, Vec3>> touching;

@@ -363,11 +363,28 @@ void ClothBodyContact::apply_constraint_impulses(Cloth& cloth, const ContactBodi
 // with weights `w`): push the point out to distance h, friction on its relative slip,
 // shared by its vertices in proportion to weight and inverse mass (pinned ones take none),
 // and the opposite momentum to the body (body < 0: the ground)
-void ClothBodyContact::contact_point(Points& v, ContactBodies& bodies, double dt, const int* ids, const double* w,
-                                     int count, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
+void ClothBodyContact::contact_point(const Points& x, Points& v, ContactBodies& bodies, double dt, const int* ids,
+                                     const double* w, int count, int body, const Vec3& xc, const Vec3& normal,
+                                     double phi, double mu) {
   const double h = thickness_;
   const Eigen::VectorXd& inverse_mass = inverse_mass_;
   Touches& touches = touches_;
+  // a moving keyed body passes through the vertices the cloth let into it (let_in), and
+  // through those that were inside it at the step's start while a still surface holds them
+  // (the ground it presses the cloth into: the cloth cannot be in two places). Pushed out of
+  // its nearest face, they would be flung up. One the cloth alone holds, by its pins, is
+  // pushed: a keyed ball crossing a curtain pushes it aside
+  if (body >= 0 && bodies.body(body).kinematic && !bodies.body(body).still) {
+    const ContactBody& passing = bodies.body(body);
+    for (int i = 0; i < count; ++i) {
+      const int k = ids[i];
+      if (passing.let_in && (*passing.let_in)[k]) return;
+      if (touches.normal[k].squaredNorm() > 0.0 &&
+          passing.shape->phi(passing.start_pose.apply_inverse(Vec3(x.row(k).transpose()))) < 0.0) {
+        return;
+      }
+    }
+  }
   double denom = 0.0, weight = 0.0, lever = 0.0;
   Vec3 point_velocity = Vec3::Zero();
   for (int i = 0; i < count; ++i) {
@@ -416,7 +433,7 @@ void ClothBodyContact::collide_with_body(Cloth& cloth, ContactBodies& bodies, in
   const int n = cloth.vertex_count();
   auto contact_point = [&](const int* ids, const double* w, int count, int body, const Vec3& xc, const Vec3& normal,
                            double phi, double mu) {
-    this->contact_point(v, bodies, dt, ids, w, count, body, xc, normal, phi, mu);
+    this->contact_point(x, v, bodies, dt, ids, w, count, body, xc, normal, phi, mu);
   };
   auto contact = [&](int k, int body, const Vec3& xc, const Vec3& normal, double phi, double mu) {
     const double one = 1.0;
@@ -491,7 +508,7 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
       const double phi = xc.y() - ground->height;
       if (phi < h) {
         const double one = 1.0;
-        contact_point(v, bodies, dt, &k, &one, 1, -1, xc, Vec3::UnitY(), phi, mu);
+        contact_point(x, v, bodies, dt, &k, &one, 1, -1, xc, Vec3::UnitY(), phi, mu);
       }
     }
   }

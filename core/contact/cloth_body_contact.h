@@ -77,8 +77,8 @@ class ClothBodyContact {
   void separate_pinches(ContactBodies& bodies, double dt, const std::vector<int>& near, const std::vector<Pinch>& pinches);
   double surface_friction(const ContactBodies& bodies, int b) const;
   // one contact of a point of the cloth (collide), and the cloth against one body
-  void contact_point(Points& v, ContactBodies& bodies, double dt, const int* ids, const double* w, int count, int body,
-                     const Vec3& xc, const Vec3& normal, double phi, double mu);
+  void contact_point(const Points& x, Points& v, ContactBodies& bodies, double dt, const int* ids, const double* w,
+                     int count, int body, const Vec3& xc, const Vec3& normal, double phi, double mu);
   void collide_with_body(Cloth& cloth, ContactBodies& bodies, int b, const Box3& reach, double dt);
   // body b's features against the cloth (spaced for its edges), made at the first call
   const BodyFeatures& body_features(const ContactBodies& bodies, int b);

@@ -39,6 +39,11 @@ struct ContactBody {
   bool kinematic = false;
   bool still = false;                     // static, or kinematic and not moving this step
   int island = 0;                         // its sleeping island: waking it wakes every sleeper of the island
+  // (cloth vertices) or null: the vertices this body, kinematic and moving, passes through
+  // this step, no contact pushing them out (a keyed obstacle the cloth has let in:
+  // contact/cloth_obstacles.h); it passes through those inside it at the step's start that a
+  // still surface holds, too
+  const std::vector<char>* let_in = nullptr;
 };
 
 // The ground plane y = height, as the contacts see it
@@ -71,6 +76,8 @@ class ContactBodies {
   // Adds a body with its velocity (m/s), angular momentum (kg m^2/s, world) and sleep now
   void add(const ContactBody& body, const Vec3& velocity, const Vec3& angular_momentum, bool asleep);
   void set_ground(const ContactGround& ground) { ground_ = ground; }
+  // the cloth vertices body b passes through this step (ContactBody::let_in), or null
+  void set_let_in(int b, const std::vector<char>* vertices) { bodies_[b].let_in = vertices; }
 
   int count() const { return static_cast<int>(bodies_.size()); }
   const ContactBody& body(int b) const { return bodies_[b]; }

@@ -68,13 +68,18 @@ class BodySpeeds {
     return speed;
   }
 
-  // steps that keep each body's travel short (see the top of this file)
-  double body_travel_steps(double thinnest) const {
+  // steps that keep each body's travel short (see the top of this file); with `reach`, those
+  // of the kinematic bodies near that box only (as kinematic_speed_near judges near)
+  double body_travel_steps(double thinnest, const Box3* reach = nullptr, double reach_speed = 0.0) const {
     double steps = 1.0;
     for (int i = 0; i < model_.body_count(); ++i) {
       if (data_.asleep[i]) continue;
       const RigidBodyDef& def = model_.defs[i];
       const double speed = body_speed(i);
+      if (reach && def.kinematic) {
+        const double radius = def.bounding_radius + (speed + reach_speed) * frame_dt_;
+        if ((data_.x[i].cwiseMax(reach->min()).cwiseMin(reach->max()) - data_.x[i]).norm() > radius) continue;
+      }
       const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
       steps = std::max(steps, std::ceil(speed * frame_dt_ / limit));
     }
@@ -145,7 +150,7 @@ FrameSchedule frame_schedule(const RigidModel& model, const RigidData& data, con
   const double rigid = rigid_steps(model, data, !cloths.empty(), settings, frame_dt, travel);
   if (cloths.empty()) return {static_cast<int>(rigid), 1};
 
-  double steps = std::max(std::ceil(frame_dt / settings.cloth_max_substep), travel);
+  double steps = std::ceil(frame_dt / settings.cloth_max_substep);
   Box3 reach;                  // the cloths now
   double fastest = 0.0;        // their fastest vertex (m/s)
   double reach_speed = 0.0;    // ... or their thickness over the frame, whichever is more
@@ -162,6 +167,13 @@ FrameSchedule frame_schedule(const RigidModel& model, const RigidData& data, con
     reach_speed = std::max({reach_speed, fastest, stepped.contact.thickness() / frame_dt});
     shortest_edge = std::min(shortest_edge, stepped.contact.mean_edge());
   }
+  // the bodies' travel; with no dynamic body, that of the kinematic bodies near the cloths
+  // only (they pass through the ground and each other): a keyed body gone through the cloth
+  // at 1 km/s would otherwise hold every frame at hundreds of cloth steps, and at such short
+  // steps the cloth's repulsions (0.1 (h - d) / dt) throw its layers about
+  bool dynamic = false;
+  for (int i = 0; i < model.body_count(); ++i) dynamic = dynamic || !model.defs[i].kinematic;
+  steps = std::max(steps, dynamic ? travel : bodies.body_travel_steps(thinnest, &reach, reach_speed));
   const double gravity_speed = settings.gravity.norm() * frame_dt;  // what gravity adds in a frame
   if (model.body_count() > 0) {
     steps = std::max(steps, std::ceil((fastest + gravity_speed) * frame_dt / (settings.travel_fraction * thinnest)));

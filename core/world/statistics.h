@@ -24,6 +24,8 @@ struct StepStatistics {
   double potential_energy = 0.0;   // gravity, -m g.x (J), now
   long long impulses = 0;          // collision and contact impulses applied, in total
   SelfCollisionStatistics self_collision;  // the cloths' self-collision work, in total
+  long long cloth_gave = 0;        // cloth steps in which a cloth was stretched past what its strain
+                                   // limit can hold (cloth/cloth_step.cpp, kGiveStrain), in total
   bool finite = true;              // false once any state went NaN or infinite
 };
 

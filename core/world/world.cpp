@@ -60,7 +60,7 @@ int World::automatic_cloth_steps(double frame_dt) const {
   return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt).cloth_steps;
 }
 
-int World::step_frame(double frame_dt, int substeps) {
+int World::step_frame(double frame_dt, int substeps, const std::function<bool()>& stop) {
   if (!(frame_dt > 0.0 && std::isfinite(frame_dt))) throw std::invalid_argument("frame_dt must be > 0");
   // the cloths step once every `group` substeps, over the group's time (a fixed substep
   // count steps them every substep)
@@ -71,8 +71,17 @@ int World::step_frame(double frame_dt, int substeps) {
   const int cloth_steps = std::min(schedule.cloth_steps, n);
   const int group = n % cloth_steps == 0 ? n / cloth_steps : 1;
   tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
+  bool stopped = false;
+  int taken = n;
   arena.execute([&] {
     for (int k = 0; k < n && stats_.finite; ++k) {
+      // (asked between substeps: a signal ends a long frame within a substep; the state after
+      // each substep is the same whether or not anyone asks)
+      if (k > 0 && stop && stop()) {
+        stopped = true;
+        taken = k;
+        break;
+      }
       if (k % group == 0) begin_cloth_step();
       step_bodies(dt);
       if ((k + 1) % group == 0) {
@@ -83,6 +92,7 @@ int World::step_frame(double frame_dt, int substeps) {
       if (!state_finite(rigid_data_, cloths_)) stats_.finite = false;
     }
   });
+  if (stopped) return taken;
   {
     StageTimer timer(profile_, Stage::kStatistics);
     arena.execute([&] { gather_statistics(rigid_model_, rigid_data_, rigid_scratch_.pairs, cloths_, settings_, stats_); });
@@ -140,7 +150,7 @@ void World::step_cloths(double dt) {
     // the bodies as the contacts see them, posed as they are now (only the pinches at the
     // end of this cloth's step move them); what the contacts did to them, applied after
     describe_bodies(rigid_model_, rigid_data_, coupling_);
-    step_cloth(cloth, coupling_.bodies, dt, cloth_settings, profile_, stats_.self_collision);
+    if (step_cloth(cloth, coupling_.bodies, dt, cloth_settings, profile_, stats_.self_collision)) ++stats_.cloth_gave;
     apply_contact_results(coupling_.bodies, rigid_model_, rigid_data_);
   }
 }

@@ -18,6 +18,7 @@
 #include "world/world_settings.h"
 
 #include <array>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -44,8 +45,11 @@ class World {
   double time() const { return time_; }  // (s) simulated so far
 
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
-  // substeps == 0; returns the number of substeps taken
-  int step_frame(double frame_dt, int substeps = 0);
+  // substeps == 0; returns the number of substeps taken. `stop`, if given, is asked before
+  // each substep after the first (it must be cheap: the bindings' looks at the clock and, every
+  // 50 ms, at Python's signals); when it says true the frame ends there, part-way, without
+  // its statistics, and the world is left at that substep. It changes nothing else
+  int step_frame(double frame_dt, int substeps = 0, const std::function<bool()>& stop = nullptr);
   // One substep: the stages in order, the cloths stepped with the bodies
   void step(double dt);
   // Substeps the automatic rule picks for the next frame (a multiple of the cloth steps)
