@@ -21,7 +21,9 @@ struct PenetrationFigure {
 
 struct ClothQuality {
   double max_strain = 0.0;               // largest edge strain |l| / L - 1
-  long long self_intersections = 0;      // pairs of triangles sharing no vertex that cross
+  long long self_intersections = 0;      // pairs of triangles sharing no vertex that cross; -1 when
+                                         // not counted (more candidate pairs than kPairTestBudget:
+                                         // a cloth crumpled into a few cells)
   PenetrationFigure vertex_penetration;  // deepest vertex inside a body or the ground (a = this cloth)
   PenetrationFigure edge_penetration;    // deepest point along an edge (its eighths), likewise
 };

@@ -13,6 +13,7 @@
 #include "world/cloth_coupling.h"
 #include "world/schedule.h"
 
+#include <tbb/info.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -70,7 +71,10 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   const double dt = frame_dt / n;
   const int cloth_steps = std::min(schedule.cloth_steps, n);
   const int group = n % cloth_steps == 0 ? n / cloth_steps : 1;
-  tbb::task_arena arena(settings_.threads > 0 ? settings_.threads : tbb::task_arena::automatic);
+  // (more threads than the machine has would only be refused by TBB, with a warning on
+  // stderr: the results are the same bits on any count, so the arena takes what there is)
+  tbb::task_arena arena(settings_.threads > 0 ? std::min(settings_.threads, tbb::info::default_concurrency())
+                                             : tbb::task_arena::automatic);
   bool stopped = false;
   int taken = n;
   arena.execute([&] {

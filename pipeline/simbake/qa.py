@@ -16,7 +16,9 @@ Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
   an edge's eighths (the cloth's thickness not counted): the cloth keeps its
   thickness (5 mm by default) away from surfaces, so anything past the surface is a miss.
 * ``cloth_strain``: the cloth's ``strain_limit`` plus 1% of it (no threshold when 0).
-* ``cloth_self_intersections``: 0 crossing pairs of triangles (a layer through another).
+* ``cloth_self_intersections``: 0 crossing pairs of triangles (a layer through another); a
+  cloth's count is -1 at a frame where it was too crumpled to count within the work budget
+  (warned).
 * ``substeps``: a frame whose automatic substeps reached the solver's cap (``max_substeps``,
   4096); none when the scene fixes its substeps (its own choice, up to that cap).
 * ``energy_gain``, ``unexplained_stop``, ``imparted_speed``: energy made up by the solver, a
@@ -149,7 +151,7 @@ class QualityRecorder:
             c["edge_penetration"].append(float(q["edge_penetration"][0]))
             deepest = max(deepest, c["vertex_penetration"][-1], c["edge_penetration"][-1])
             strain = max(strain, c["strain"][-1])
-            crossings += c["self_intersections"][-1]
+            crossings += max(c["self_intersections"][-1], 0)  # (-1: not counted, warned below)
         f["cloth_penetration"].append(deepest)
         f["cloth_strain"].append(strain)
         f["cloth_self_intersections"].append(crossings)
@@ -217,6 +219,11 @@ class QualityRecorder:
             over(f"cloth {name!r} penetration", depth, CLOTH_PENETRATION, "mm", 1e3)
             over(f"cloth {name!r} strain", c["strain"], self.limits[name], "%", 1e2)
             over(f"cloth {name!r} self-intersections", c["self_intersections"], 0, "pairs", 1)
+            uncounted = [self.frames[k] for k, v in enumerate(c["self_intersections"]) if v < 0]
+            if uncounted:
+                lines.append(f"QA: cloth {name!r} self-intersections not counted at {len(uncounted)} frame(s) "
+                             f"from frame {uncounted[0]}: too crumpled to count within the work budget "
+                             f"(2e8 candidate pairs); see {sidecar}")
         over("substeps at the solver's cap", self.figures["substeps"], self.thresholds["substeps"], "", 1)
         over("cloth fallbacks (steps held still, bodies let through the cloth)", self.figures["cloth_fallbacks"],
              self.thresholds["cloth_fallbacks"], "", 1)

@@ -238,3 +238,24 @@ def test_triangle_indices_never_wrap_or_truncate(triangles, words):
             call(vertices, triangles)
     assert _core.vertex_normals(vertices, np.array([[0, 1, 2]], dtype=np.int64)).shape == (3, 3)
     assert _core.vertex_normals(vertices, np.zeros((0, 3))).shape == (3, 3)  # no triangles at all
+
+
+def test_quality_of_a_crumpled_cloth_is_bounded_and_says_so():
+    """The QA's self-intersection count has the triangle-pair budget too: a cloth of 100,000
+    triangles crumpled into a 1 mm cube (~1e10 candidate pairs) answers at once with -1 (not
+    counted), which the QA turns into a warning; an even sheet is counted (0)."""
+    import time
+
+    rng = np.random.default_rng(31)
+    world = _core.World()
+    world.add_cloth(rest=1e-3 * rng.random((300_000, 3)), triangles=np.arange(300_000, dtype=np.int32).reshape(-1, 3),
+                    self_collision=False)
+    start = time.monotonic()
+    assert world.quality()["cloths"][0]["self_intersections"] == -1
+    assert time.monotonic() - start < 30
+    n = 16
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
+    p = (j[:-1, :-1] * n + i[:-1, :-1]).ravel()
+    sheet = np.concatenate([np.stack([p, p + n, p + n + 1], 1), np.stack([p, p + n + 1, p + 1], 1)]).astype(np.int32)
+    world.add_cloth(rest=np.stack([i.ravel() / n, np.ones(n * n), j.ravel() / n], axis=1), triangles=sheet)
+    assert world.quality()["cloths"][1]["self_intersections"] == 0
