@@ -193,8 +193,10 @@ def _show(values) -> str:
 # Loading
 # --------------------------------------------------------------------------------------------
 
-def load_shot(path: str | os.PathLike[str]) -> Scene:
-    """Read a USD stage as a Scene; raise :class:`SceneError` (one line) on any problem:
+def load_shot(path: str | os.PathLike[str], frames: tuple[int, int] | None = None) -> Scene:
+    """Read a USD stage as a Scene; `frames` (START, END), when given, is the range to bake
+    in place of the stage's own startTimeCode/endTimeCode (``--frames``; a stage with no range
+    needs it). Raise :class:`SceneError` (one line) on any problem:
     a syntax error (at its line and column, in whichever layer), a composition error (a
     missing or cyclic sublayer, a reference or payload that does not resolve), bad values.
     OpenUSD's own warnings become the scene's warnings; nothing of OpenUSD's reaches stderr."""
@@ -218,7 +220,7 @@ def load_shot(path: str | os.PathLike[str]) -> Scene:
     if composition or opened.errors:
         raise _usd_error(file, stage_path, opened.errors + composition, "composition error")
     with trapped() as parsing:
-        reader = _Reader(file, stage_path, stage)
+        reader = _Reader(file, stage_path, stage, frames)
         scene = reader.scene()
     if parsing.errors:
         raise _usd_error(file, stage_path, parsing.errors, "OpenUSD reported an error")
@@ -241,7 +243,7 @@ def _usd_error(file: str, stage_path: Path, texts: list[str], what: str) -> Scen
 class _Reader:
     """One stage read into a Scene; errors name the file, the prim path and the attribute."""
 
-    def __init__(self, file: str, path: Path, stage):
+    def __init__(self, file: str, path: Path, stage, frames: tuple[int, int] | None = None):
         from pxr import UsdGeom, UsdPhysics
 
         self.file, self.path, self.stage = file, path, stage
@@ -249,6 +251,7 @@ class _Reader:
         self.keys: list[tuple[str, str]] = []    # scene key -> "PRIM.attribute" (ShotInfo.keys)
         self.instances: set[str] = set()          # instanceable prims above simulated ones
         self._warned: set[str] = set()
+        self._named: dict[str, list] = {}        # warn_once: name -> [first prim, problem, prims]
         axis = UsdGeom.GetStageUpAxis(stage)
         if axis not in ("Y", "Z"):
             raise self.error("", "upAxis", f"must be Y or Z, got {axis!r}")
@@ -260,18 +263,24 @@ class _Reader:
                 raise self.error("", name, f"must be a finite number > 0, got {value}")
         self.C = _Z_UP if axis == "Z" else np.eye(3)
         self.qC = (_SQRT_HALF, -_SQRT_HALF, 0.0, 0.0) if axis == "Z" else (1.0, 0.0, 0.0, 0.0)
-        if not stage.HasAuthoredTimeCodeRange():
-            raise self.error("", "startTimeCode", "the stage needs startTimeCode and endTimeCode "
-                                                  "(one frame per integer time code)")
-        self.start, self.end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
-        for name, value in (("startTimeCode", self.start), ("endTimeCode", self.end)):
+        self.frames_given = frames is not None
+        if frames is not None:  # --frames START:END overrides the stage's own range
+            self.start, self.end = float(frames[0]), float(frames[1])
+            start_name = end_name = "--frames"
+        elif not stage.HasAuthoredTimeCodeRange():
+            raise self.error("", "startTimeCode", "the stage has no startTimeCode and endTimeCode; give the "
+                                                  "frames to bake with --frames START:END")
+        else:
+            self.start, self.end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+            start_name, end_name = "startTimeCode", "endTimeCode"
+        for name, value in ((start_name, self.start), (end_name, self.end)):
             if not (math.isfinite(value) and value == int(value)):
                 raise self.error("", name, f"must be an integer time code, got {value}")
         if self.end < self.start:
-            raise self.error("", "endTimeCode", f"must be >= startTimeCode ({self.start:g}), got {self.end:g}")
+            raise self.error("", end_name, f"the end must be >= the start ({self.start:g}), got {self.end:g}")
         if self.end - self.start + 1 > MAX_FRAMES:  # before any animation is sampled
-            raise self.error("", "endTimeCode", f"{self.end - self.start + 1:.0f} frames is more than the budget of "
-                                                f"{MAX_FRAMES:,} frames in one bake; bake it in parts")
+            raise self.error("", end_name, f"{self.end - self.start + 1:.0f} frames is more than the budget of "
+                                           f"{MAX_FRAMES:,} frames in one bake; bake a part with --frames START:END")
         self.tcps = float(stage.GetTimeCodesPerSecond())
         if not (math.isfinite(self.tcps) and self.tcps > 0):
             raise self.error("", "timeCodesPerSecond", f"must be > 0, got {self.tcps}")
@@ -289,6 +298,23 @@ class _Reader:
         if key not in self._warned:
             self._warned.add(key)
             self.warnings.append(f"{self.file}: {prim_path}: {problem}")
+
+    def warn_once(self, name: str, prim_path, problem: str) -> None:
+        """Once per attribute or schema `name` however many prims author it: the first prim is
+        named and the others counted (an opinion on 500 props is one line, not 500)."""
+        entry = self._named.get(name)
+        if entry is None:
+            self._named[name] = [str(prim_path), problem, {str(prim_path)}]
+            self.warnings.append(name)  # a placeholder, written out by _named_warnings
+        else:
+            entry[2].add(str(prim_path))
+
+    def _named_warnings(self) -> None:
+        for i, line in enumerate(self.warnings):
+            if line in self._named:
+                first, problem, prims = self._named[line]
+                more = f" (and {len(prims) - 1} more prim{'s' if len(prims) > 2 else ''})" if len(prims) > 1 else ""
+                self.warnings[i] = f"{self.file}: {first}: {problem}{more}"
 
     # -- conversions --------------------------------------------------------------------------
 
@@ -345,13 +371,16 @@ class _Reader:
                 shapes[str(p)] = d
         for kind, entries in descs.items():
             if kind not in _SUPPORTED:
-                for p, _ in entries:
-                    self.warn(p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
-        for p, d in shapes.items():
+                for p, _ in sorted(entries, key=lambda e: str(e[0])):
+                    self.warn_once(str(kind), p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
+        for p, d in sorted(shapes.items()):
             if d.collisionGroups:
-                self.warn(p, "collision groups are not simulated by simbake; the collider collides with everything")
+                self.warn_once("PhysicsCollisionGroup", p, "collision groups are not simulated by simbake; "
+                                                           "the collider collides with everything")
             if d.filteredCollisions:
-                self.warn(p, "filtered collision pairs are not simulated by simbake; left out")
+                self.warn_once("physics:filteredPairs", p, "filtered collision pairs are not simulated by "
+                                                           "simbake; the pair collides")
+        self.substeps = self._physx()
 
         gravity = self._gravity(descs.get(T.Scene, []))
         self.dynamic_paths = {str(p) for p, d in descs.get(T.RigidBody, [])
@@ -383,8 +412,10 @@ class _Reader:
                 bodies.append(self._static_body(p, d, used_names, len(bodies)))
 
         cloths, shot_cloths = self._cloths(used_names)
-        self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", "startTimeCode"),
-                      ("scene.end_frame", "endTimeCode"), ("solver.substeps", "endTimeCode")]
+        self._named_warnings()
+        ranged = ("--frames", "--frames") if self.frames_given else ("startTimeCode", "endTimeCode")
+        self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", ranged[0]),
+                      ("scene.end_frame", ranged[1]), ("solver.substeps", ranged[1])]
         fps_meta = self.stage.GetFramesPerSecond() if self.stage.GetRootLayer().HasFramesPerSecond() else None
         info = ShotInfo(
             path=self.path,
@@ -396,7 +427,8 @@ class _Reader:
             default_prim=self.stage.GetRootLayer().defaultPrim,
             bodies=tuple(shot_bodies), cloths=tuple(shot_cloths), dependencies=self._dependencies(),
             instances=tuple(sorted(self.instances)), keys=tuple(self.keys))
-        return Scene(path=self.path, source=self.file, fps=self.tcps, start_frame=int(self.start),
+        return Scene(path=self.path, source=self.file, fps=self.tcps, substeps=self.substeps,
+                     start_frame=int(self.start),
                      end_frame=int(self.end), gravity=gravity, ground=ground, bodies=tuple(bodies),
                      cloths=tuple(cloths), warnings=tuple(self.warnings), shot=info)
 
@@ -450,7 +482,7 @@ class _Reader:
         """(friction, restitution, density in kg/m^3 or None) of a collider's physics material;
         its prim is left in `material_path` (the collider's when it has none)."""
         self.material_path = str(shape_path)
-        for m in shape.materials:
+        for m in list(shape.materials) or self._binding_without_api(shape_path):
             d = self.materials.get(str(m))
             if d is None:
                 continue
@@ -460,15 +492,84 @@ class _Reader:
             if not (math.isfinite(restitution) and 0 <= restitution <= 1):
                 raise self.error(m, "physics:restitution", f"must be in [0, 1], got {restitution}")
             if _decimal(d.staticFriction) != friction:
-                self.warn(m, f"physics:staticFriction ({float(d.staticFriction):g}) differs from "
-                             f"physics:dynamicFriction ({friction:g}); simbake uses one Coulomb "
-                             "coefficient, the dynamic one")
+                self.warn_once("physics:staticFriction", m,
+                               f"physics:staticFriction ({float(d.staticFriction):g}) differs from "
+                               f"physics:dynamicFriction ({friction:g}); simbake uses one Coulomb "
+                               "coefficient, the dynamic one")
             density = _decimal(d.density)
             if not (math.isfinite(density) and density >= 0):
                 raise self.error(m, "physics:density", f"must be a finite number >= 0 (0: unset), got {density}")
             self.material_path = str(m)
             return friction, restitution, density * self.kpu / self.mpu ** 3 if density > 0 else None
         return Body.friction, Body.restitution, None
+
+    def _binding_without_api(self, shape_path) -> list[str]:
+        """A `material:binding:physics` (else `material:binding`) relationship on the collider
+        or an ancestor that has no MaterialBindingAPI applied: OpenUSD's parser ignores it, but
+        it is the binding the author meant (OpenUSD's own usdPhysicsSpheresWithMaterial.usda is
+        written so). Read, with one warning naming the missing API. The nearest prim wins, its
+        physics-purpose binding before its all-purpose one, as UsdShade resolves them; a target
+        without PhysicsMaterialAPI (a render material) is no physics material."""
+        from pxr import UsdShade, UsdPhysics
+
+        prim = self.stage.GetPrimAtPath(shape_path)
+        while prim and not prim.IsPseudoRoot():
+            if not prim.HasAPI(UsdShade.MaterialBindingAPI):
+                for name in ("material:binding:physics", "material:binding"):
+                    rel = prim.GetRelationship(name)
+                    targets = [str(t) for t in rel.GetTargets()] if rel else []
+                    target = self.stage.GetPrimAtPath(targets[0]) if targets else None
+                    if target and target.HasAPI(UsdPhysics.MaterialAPI):
+                        self.warn_once("MaterialBindingAPI", prim.GetPath(),
+                                       f"{name} without MaterialBindingAPI applied (OpenUSD's parser ignores it); "
+                                       "read as the author meant: apply MaterialBindingAPI for other tools")
+                        if targets[0] not in self.materials:
+                            self.materials[targets[0]] = _MaterialDesc(UsdPhysics.MaterialAPI(target))
+                        return [targets[0]]
+            prim = prim.GetParent()
+        return []
+
+    def _physx(self) -> int:
+        """PhysX's own attributes (Omniverse Kit writes them: PhysxSchema is not in usd-core):
+        those that map onto simbake settings are read, those whose value is what simbake does
+        anyway pass, the rest are warned about once per attribute name (see _PHYSX_MAPPED and
+        _PHYSX_NEUTRAL). Returns the solver's substeps per frame (0: automatic)."""
+        substeps = 0
+        for prim in self.stage.Traverse():
+            listop = prim.GetMetadata("apiSchemas")  # unregistered schemas too (PhysxSchema)
+            for schema in (listop.ApplyOperations([]) if listop else []):
+                if schema.startswith("Physx") and schema.split(":")[0] in _PHYSX_BEHAVIOUR:
+                    self.warn_once(schema, prim.GetPath(), f"{schema} {_PHYSX_BEHAVIOUR[schema.split(':')[0]]}")
+            for attr in prim.GetAuthoredAttributes():
+                name = attr.GetName()
+                if not name.startswith("physx") or not attr.HasAuthoredValue():
+                    continue
+                value = attr.Get(self.start)
+                if name in _PHYSX_MAPPED:
+                    if name == "physxScene:timeStepsPerSecond":
+                        substeps = self._physx_steps(prim, value)
+                    continue  # read where the shape or body is read
+                neutral = _PHYSX_NEUTRAL.get(name)
+                if neutral is not None and _same(value, neutral):
+                    continue
+                self.warn_once(name, prim.GetPath(), f"{name} = {_short(_value_text(value), 40)} is a PhysX "
+                                                     "setting simbake does not read; ignored")
+        return substeps
+
+    def _physx_steps(self, prim, value) -> int:
+        """physxScene:timeStepsPerSecond -> substeps per frame (the nearest whole number)."""
+        try:
+            steps_per_second = float(value)
+        except (TypeError, ValueError):
+            raise self.error(prim.GetPath(), "physxScene:timeStepsPerSecond", f"must be a number, got {value!r}") from None
+        if not (math.isfinite(steps_per_second) and steps_per_second > 0):
+            raise self.error(prim.GetPath(), "physxScene:timeStepsPerSecond", f"must be > 0, got {value}")
+        substeps = max(1, round(steps_per_second / self.tcps))
+        if abs(substeps * self.tcps - steps_per_second) > 1e-9 * steps_per_second:
+            self.warn_once("physxScene:timeStepsPerSecond", prim.GetPath(),
+                           f"physxScene:timeStepsPerSecond = {steps_per_second:g} is not a whole number of steps "
+                           f"per frame at {self.tcps:g} fps; simbake takes {substeps} per frame")
+        return substeps
 
     # -- shapes -------------------------------------------------------------------------------
 
@@ -665,8 +766,8 @@ class _Reader:
             if not np.isfinite(np.asarray(value, dtype=np.float64)).all():
                 raise self.error(path, name, "must be finite")
         if d.startsAsleep:
-            self.warn(path, "physics:startsAsleep is not supported; the body starts awake "
-                            "(and sleeps after 0.5 s at rest)")
+            self.warn_once("physics:startsAsleep", path, "physics:startsAsleep is not supported; the body "
+                                                         "starts awake (and sleeps after 0.5 s at rest)")
         keys = self._keys(prim) if kinematic else ()
         body = Body(
             name=self._name(path, used), shape=shape, density=density, mass=mass,
@@ -988,6 +1089,58 @@ class _ClothAttributes:
 # --------------------------------------------------------------------------------------------
 # helpers
 # --------------------------------------------------------------------------------------------
+
+class _MaterialDesc:
+    """A physics material read from its prim (the parser's RigidBodyMaterialDesc fields),
+    for a material bound without MaterialBindingAPI (the parser skips those)."""
+
+    def __init__(self, api):
+        self.dynamicFriction = api.GetDynamicFrictionAttr().Get() or 0.0
+        self.staticFriction = api.GetStaticFrictionAttr().Get() or 0.0
+        self.restitution = api.GetRestitutionAttr().Get() or 0.0
+        self.density = api.GetDensityAttr().Get() or 0.0
+
+
+# PhysX attributes simbake reads: the solver's steps per second (substeps per frame), and the
+# collision thickness and SDF resolution of mesh colliders (see _Reader._collider_geometry)
+_PHYSX_MAPPED = ("physxScene:timeStepsPerSecond", "physxCollision:restOffset",
+                 "physxSDFMeshCollision:sdfResolution")
+# PhysX attributes whose value, when it is this, is what simbake does anyway: no warning
+_PHYSX_NEUTRAL = {
+    "physxRigidBody:linearDamping": 0.0, "physxRigidBody:angularDamping": 0.0,
+    "physxRigidBody:disableGravity": False, "physxRigidBody:enableCCD": True,
+    "physxRigidBody:enableSpeculativeCCD": True, "physxRigidBody:retainAccelerations": False,
+    "physxScene:enableCCD": True, "physxScene:enableGPUDynamics": False,
+    "physxCollision:contactOffset": None,  # a detection margin: simbake's contacts are speculative
+    "physxMaterial:frictionCombineMode": "average", "physxMaterial:restitutionCombineMode": "average",
+}
+# PhysX schemas that change what happens by being applied
+_PHYSX_BEHAVIOUR = {
+    "PhysxTriggerAPI": "(a trigger volume) is not simulated by simbake: the collider collides",
+    "PhysxCharacterControllerAPI": "is not simulated by simbake; the prim is a plain collider",
+    "PhysxDeformableBodyAPI": "is not simulated by simbake; left out",
+    "PhysxDeformableSurfaceAPI": "is not simulated by simbake (use SimbakeClothAPI); left out",
+    "PhysxParticleSystem": "is not simulated by simbake; left out",
+    "PhysxVehicleAPI": "is not simulated by simbake; the prim is a plain rigid body",
+}
+
+
+def _same(value, neutral) -> bool:
+    if neutral is None:
+        return True
+    if isinstance(neutral, str):
+        return str(value) == neutral
+    try:
+        return bool(value == neutral) if isinstance(neutral, bool) else float(value) == float(neutral)
+    except (TypeError, ValueError):
+        return False
+
+
+def _value_text(value) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
 
 _SUPPORTED_NAMES = ("Scene", "RigidBody", "RigidBodyMaterial", "CubeShape", "SphereShape",
                     "CapsuleShape", "CylinderShape", "MeshShape", "PlaneShape", "Capsule1Shape",
