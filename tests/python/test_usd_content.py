@@ -304,3 +304,36 @@ def test_physx_attributes_map_or_are_warned_once_per_name(tmp_path, capsys):
         t = frame / 24
         y = float(_world(stage, "/World/box1", frame)[1, 3])
         assert y == pytest.approx(5.0 - 0.5 * G * t * (t + 1 / 240), abs=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# 3. body meshes under the body's own name
+# --------------------------------------------------------------------------------------------
+
+def test_a_bodys_mesh_is_named_as_the_body(tmp_path):
+    """Blender merges an Xform with its single child and names the object after the child:
+    /World/ball/ball keeps the name 'ball' (it was 'mesh', 'mesh.001', ...). A body called
+    'levelset' does not meet its level-set Volume."""
+    toml = _write(tmp_path / "s.toml", """
+        [scene]
+        end_frame = 2
+        [[bodies]]
+        name = "ball"
+        shape = { type = "sphere", radius = 0.25 }
+        position = [0.0, 3.0, 0.0]
+        [[bodies]]
+        name = "levelset"
+        shape = { type = "box", size = [1.0, 1.0, 1.0] }
+        kinematic = true
+        """)
+    out = tmp_path / "c.usda"
+    simbake.bake(simbake.load_scene(toml), out, qa=False)
+    stage = Usd.Stage.Open(str(out))
+    ball = stage.GetPrimAtPath("/World/ball")
+    assert [c.GetName() for c in ball.GetChildren()] == ["ball"]
+    points = np.array(UsdGeom.Mesh(ball.GetChild("ball")).GetPointsAttr().Get(), dtype=np.float64)
+    # the cube-projected sphere's points lie on the sphere (float32 points: 1e-7 relative)
+    np.testing.assert_allclose(np.linalg.norm(points, axis=1), 0.25, rtol=1e-6)
+    box = UsdGeom.Mesh(stage.GetPrimAtPath("/World/levelset/levelset_mesh"))
+    points = np.array(box.GetPointsAttr().Get(), dtype=np.float64)
+    np.testing.assert_allclose(np.abs(points).max(axis=0), 0.5, rtol=1e-7)
