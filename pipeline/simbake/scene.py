@@ -80,6 +80,9 @@ class Shape:
     mesh_vertices: Any = field(default=None, compare=False, repr=False)
     mesh_triangles: Any = field(default=None, compare=False, repr=False)
     mesh_source: str = ""
+    # an open or non-manifold mesh of a kinematic or static collider: a two-sided surface of
+    # this half-thickness (m), phi = |d| - thickness; 0 for a closed mesh (a solid)
+    thickness: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -68,6 +68,11 @@ class ShotBody:
     # an animated parent: its (rotation (w, x, y, z), translation, uniform scale) at every
     # time code from the start, in place of the parent_* fields
     parent_track: tuple = ()
+    # under a parent with non-uniform scale or shear (or a sheared or mirrored body): the
+    # body's world transform is written whole, a time-sampled xformOp:transform after
+    # !resetXformStack!, as [R(t) A, t(t)] with A (3x3, stage units, rows) the start's world
+    # transform in the body frame (the scale, shear and mirror the collision shape holds)
+    shape_matrix: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -155,6 +160,17 @@ def _quat_matrix(q) -> np.ndarray:
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _polar(m3: np.ndarray):
+    """m3 = R A with R the proper rotation nearest to m3 (SVD polar decomposition; a mirror
+    is left in A) and A = R^T m3 (scale, shear, mirror), or None for a singular m3."""
+    u, s, vt = np.linalg.svd(m3)
+    if not s.min() > _TOL * s.max():
+        return None
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ d @ vt
+    return r, r.T @ m3
 
 
 def _rotation_and_scale(m3: np.ndarray):
@@ -331,10 +347,15 @@ class _Reader:
             return _matrix(self.xforms.GetLocalToWorldTransform(prim))
         return _matrix(UsdGeom.XformCache(time).GetLocalToWorldTransform(prim))
 
-    def frame(self, prim, what: str, time=None):
-        """(R, t, k): the prim's world rotation, translation and scale along its own axes."""
+    def frame(self, prim, what: str, time=None, general: bool = False):
+        """(R, t, k): the prim's world rotation, translation and scale along its own axes.
+        `general`: a shear or a mirror is accepted (static colliders, dynamic bodies under a
+        non-uniform parent): R is then the nearest rotation, the rest goes into the shape."""
         m = self.world(prim, time)
         parts = _rotation_and_scale(m[:3, :3])
+        if parts is None and general and _polar(m[:3, :3]) is not None:
+            r, a = _polar(m[:3, :3])
+            return r, m[:3, 3], np.linalg.norm(a, axis=0)
         if parts is None:
             raise self.error(prim.GetPath(), "xformOpOrder",
                              f"the {what}'s world transform has a shear, a mirror or a zero scale; "
@@ -549,8 +570,7 @@ class _Reader:
                     if name == "physxScene:timeStepsPerSecond":
                         substeps = self._physx_steps(prim, value)
                     continue  # read where the shape or body is read
-                neutral = _PHYSX_NEUTRAL.get(name)
-                if neutral is not None and _same(value, neutral):
+                if name in _PHYSX_NEUTRAL and _same(value, _PHYSX_NEUTRAL[name]):
                     continue
                 self.warn_once(name, prim.GetPath(), f"{name} = {_short(_value_text(value), 40)} is a PhysX "
                                                      "setting simbake does not read; ignored")
@@ -581,7 +601,7 @@ class _Reader:
 
         path = prim.GetPath()
         a, t = to_body[:3, :3], to_body[:3, 3]
-        parts = _rotation_and_scale(a)
+        parts = _rotation_and_scale(a @ np.diag(np.sign(np.diag(a)) + (np.diag(a) == 0)))  # mirrors of a
         centred = np.abs(t).max() <= _TOL * max(1.0, np.abs(a).max())
         if prim.IsA(UsdGeom.Cube):
             size = self._positive(prim, "size", UsdGeom.Cube(prim).GetSizeAttr().Get())
@@ -590,7 +610,7 @@ class _Reader:
             from . import _core
 
             v, f = _core.box_mesh(np.full(3, size), 1)
-            return ("mesh", v @ a.T + t, np.asarray(f, dtype=np.int32))
+            return ("mesh", v @ a.T + t, _wound(np.asarray(f, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Sphere):
             radius = self._positive(prim, "radius", UsdGeom.Sphere(prim).GetRadiusAttr().Get())
             if centred and parts is not None and np.ptp(parts[1]) <= _TOL * parts[1].max():
@@ -599,7 +619,7 @@ class _Reader:
             from .assets import SPHERE_SUBDIVISIONS
 
             v, f = _core.sphere_mesh(radius, SPHERE_SUBDIVISIONS)
-            return ("mesh", v @ a.T + t, np.asarray(f, dtype=np.int32))
+            return ("mesh", v @ a.T + t, _wound(np.asarray(f, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Capsule) or prim.IsA(UsdGeom.Cylinder):
             import trimesh
 
@@ -613,10 +633,10 @@ class _Reader:
                 mesh = trimesh.creation.cylinder(radius=radius, height=height, sections=32)
             v = np.asarray(mesh.vertices, dtype=np.float64)  # along z, centred
             v = {"X": v[:, [2, 0, 1]], "Y": v[:, [1, 2, 0]], "Z": v}[axis]
-            return ("mesh", v @ a.T + t, np.asarray(mesh.faces, dtype=np.int32))
+            return ("mesh", v @ a.T + t, _wound(np.asarray(mesh.faces, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Mesh):
             v, f = self._mesh_triangles(prim)
-            return ("mesh", v @ a.T + t, f)
+            return ("mesh", v @ a.T + t, f[:, ::-1] if np.linalg.det(a) < 0 else f)
         raise self.error(path, "", f"a collider of type {prim.GetTypeName() or 'none'} is not supported "
                                    "(Cube, Sphere, Capsule, Cylinder, Mesh, or a static Plane)")
 
@@ -685,8 +705,10 @@ class _Reader:
         used.add(name)
         return name
 
-    def _shape(self, owner_path, colliders: list, body_r, body_t, what: str):
-        """The Shape (SI, body frame) of one or more collider prims of a body."""
+    def _shape(self, owner_path, colliders: list, body_r, body_t, what: str, two_sided: bool = False):
+        """The Shape (SI, body frame) of one or more collider prims of a body. `two_sided`
+        (static and kinematic colliders): an open or non-manifold mesh is a two-sided surface
+        with the collision thickness (physxCollision:restOffset, else SHELL_THICKNESS)."""
         pieces = []
         for prim in colliders:
             to_body = np.eye(4)
@@ -712,9 +734,35 @@ class _Reader:
             triangles.append(np.asarray(f, dtype=np.int32) + offset)
             offset += len(v)
         v, f = np.concatenate(vertices), np.concatenate(triangles)
-        self._check_closed(pieces, v, f)
+        thickness = 0.0
+        if not two_sided:
+            self._check_closed(pieces, v, f)
+        elif not self._closed(v, f):
+            thickness = self._thickness(pieces)
         return Shape(kind="mesh", mesh_vertices=_frozen(v), mesh_triangles=_frozen(f),
-                     mesh_source=str(owner_path))
+                     mesh_source=str(owner_path), thickness=thickness)
+
+    @staticmethod
+    def _closed(v, f) -> bool:
+        import trimesh
+
+        mesh = trimesh.Trimesh(v, f, process=True)
+        return bool(mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0)
+
+    def _thickness(self, pieces) -> float:
+        """An open collider's half-thickness (m): PhysX's physxCollision:restOffset (the
+        distance bodies come to rest at) when authored > 0, else SHELL_THICKNESS."""
+        from .assets import SHELL_THICKNESS
+
+        for prim, _ in pieces:
+            attr = prim.GetAttribute("physxCollision:restOffset")
+            if attr and attr.HasAuthoredValue():
+                value = attr.Get()
+                if not isinstance(value, (int, float)) or not math.isfinite(value):
+                    raise self.error(prim.GetPath(), "physxCollision:restOffset", f"must be a finite number, got {value!r}")
+                if value > 0:
+                    return float(value) * self.mpu
+        return SHELL_THICKNESS
 
     def _check_closed(self, pieces, v, f) -> None:
         import trimesh
@@ -736,7 +784,7 @@ class _Reader:
         from pxr import Usd, UsdGeom, UsdPhysics
 
         prim = self.stage.GetPrimAtPath(path)
-        r, t, k = self.frame(prim, "rigid body")
+        r, t, k = self.frame(prim, "rigid body", general=True)
         colliders = []
         for c in d.collisions:
             shape = shapes.get(str(c))
@@ -752,7 +800,7 @@ class _Reader:
         if not colliders:
             raise self.error(path, "", "a rigid body needs a collider (PhysicsCollisionAPI on a Cube, "
                                        "Sphere, Capsule, Cylinder or Mesh at or under it)")
-        shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body")
+        shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body", two_sided=bool(d.kinematicBody))
         friction, restitution, material_density = self._material(colliders[0][0].GetPath(), colliders[0][1])
         self._body_keys(index, path, colliders[0][0].GetPath(), self.material_path)
         for c, s in colliders[1:]:
@@ -807,6 +855,12 @@ class _Reader:
         animated = not reset and any(UsdGeom.Xformable(a) and UsdGeom.Xformable(a).TransformMightBeTimeVarying()
                                      for a in ancestors)
         m = self.world(parent) if ancestors and not reset else np.eye(4)
+        whole = self.world(prim)
+        if self._needs_matrix(m, whole):  # the body moves rigidly; its shape holds the rest
+            r, a = _polar(whole[:3, :3])
+            return ShotBody(index=index, prim_path=str(prim.GetPath()), parent_rotation=(1.0, 0.0, 0.0, 0.0),
+                            parent_translation=(0.0, 0.0, 0.0), parent_scale=1.0, scale=None,
+                            reset_xform_stack=True, shape_matrix=tuple(_vec(row) for row in a))
         q, t, sigma = self._similarity(parent, m)
         track = ()
         if animated:
@@ -828,6 +882,13 @@ class _Reader:
                         scale=None if np.abs(scale - 1).max() <= _TOL else _vec(scale),
                         op_types={n: ops[n] for n in ("xformOp:translate", "xformOp:orient", "xformOp:scale")
                                   if n in ops})
+
+    @staticmethod
+    def _needs_matrix(parent: np.ndarray, whole: np.ndarray) -> bool:
+        """A parent that is not a similarity, or a body whose world transform is not a rotation
+        times a scale along its own axes: translate/orient/scale cannot say where it goes."""
+        parts = _rotation_and_scale(parent[:3, :3])
+        return parts is None or np.ptp(parts[1]) > _TOL * parts[1].max() or _rotation_and_scale(whole[:3, :3]) is None
 
     def _similarity(self, parent, m: np.ndarray):
         """(rotation quaternion, translation, uniform scale) of a parent's world transform."""
@@ -940,8 +1001,8 @@ class _Reader:
 
     def _static_body(self, path, d, used: set[str], index: int) -> Body:
         prim = self.stage.GetPrimAtPath(path)
-        r, t, _ = self.frame(prim, "static collider")
-        shape = self._shape(path, [prim], r, t, "static collider")
+        r, t, _ = self.frame(prim, "static collider", general=True)
+        shape = self._shape(path, [prim], r, t, "static collider", two_sided=True)
         friction, restitution, _ = self._material(path, d)
         self._body_keys(index, path, path, self.material_path)
         position, orientation = self.pose(r, t)
@@ -1162,6 +1223,11 @@ def _describe_kind(kind) -> str:
     return {"Articulation": "an articulation", "CollisionGroup": "a collision group",
             "ConeShape": "a cone collider", "CustomShape": "a custom collider",
             "SpherePointsShape": "a sphere-points collider"}.get(name, name)
+
+
+def _wound(faces: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Triangles wound outwards after the linear map `a` (a mirror turns them inside out)."""
+    return faces[:, ::-1].copy() if np.linalg.det(a) < 0 else faces
 
 
 def _has_cloth_api(prim) -> bool:

@@ -337,3 +337,115 @@ def test_a_bodys_mesh_is_named_as_the_body(tmp_path):
     box = UsdGeom.Mesh(stage.GetPrimAtPath("/World/levelset/levelset_mesh"))
     points = np.array(box.GetPointsAttr().Get(), dtype=np.float64)
     np.testing.assert_allclose(np.abs(points).max(axis=0), 0.5, rtol=1e-7)
+
+
+# --------------------------------------------------------------------------------------------
+# 4. static colliders as PhysX reads them; scaled parents of dynamic bodies
+# --------------------------------------------------------------------------------------------
+
+SHOTS = Path(__file__).resolve().parents[1] / "data" / "shots"
+
+QUAD = """\
+    #usda 1.0
+    (
+        defaultPrim = "World"
+        startTimeCode = 1
+        endTimeCode = {end}
+        timeCodesPerSecond = 24
+        metersPerUnit = 1
+        upAxis = "Y"
+    )
+    def Xform "World"
+    {{
+        def PhysicsScene "physicsScene"
+        {{
+            float physics:gravityMagnitude = {gravity}
+        }}
+        def Mesh "quad" (prepend apiSchemas = ["PhysicsCollisionAPI"{offset_api}])
+        {{
+            int[] faceVertexCounts = [4]
+            int[] faceVertexIndices = [0, 1, 2, 3]
+            point3f[] points = [(-1, 0, -1), (1, 0, -1), (1, 0, 1), (-1, 0, 1)]
+            {offset}
+        }}
+        def Sphere "ball" (prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsCollisionAPI"])
+        {{
+            double radius = 0.1
+            vector3f physics:velocity = (0, {speed}, 0)
+            double3 xformOp:translate = (0.2, {height}, 0.1)
+            uniform token[] xformOpOrder = ["xformOp:translate"]
+        }}
+    }}
+"""
+
+
+def _quad(path, *, end=36, gravity=9.81, height=0.4, speed=0.0, rest_offset=None):
+    offset = f"float physxCollision:restOffset = {rest_offset}" if rest_offset is not None else ""
+    return _write(path, QUAD.format(end=end, gravity=gravity, height=height, speed=speed, offset=offset,
+                                    offset_api=', "PhysxCollisionAPI"' if rest_offset is not None else ""))
+
+
+@pytest.mark.parametrize("rest_offset, thickness", [(None, 0.01), (0.03, 0.03)])
+def test_a_ball_rests_on_a_single_quad_ground_at_its_thickness(tmp_path, rest_offset, thickness):
+    """An open quad is a two-sided surface of half-thickness t (1 cm, or PhysX's restOffset):
+    the ball comes to rest with its centre r + t above it (the quad's grid: voxel t, its
+    interpolated |d| within ~h/4 of the truth by the surface: 3 mm)."""
+    shot = _quad(tmp_path / "quad.usda", rest_offset=rest_offset)
+    scene = simbake.load_scene(shot)
+    quad = next(b for b in scene.bodies if b.name == "quad")
+    assert quad.kinematic and quad.shape.thickness == pytest.approx(thickness)
+    out = tmp_path / "c.usdc"
+    simbake.bake(scene, out, qa=False)
+    stage = _composed(shot, out)
+    assert _height(stage, 36) == pytest.approx(0.1 + thickness, abs=0.003)
+
+
+def test_the_quad_is_two_sided(tmp_path):
+    """No gravity; the ball starts under the quad moving up at 2 m/s: it must stop at the
+    underside (centre -(r + t)) and never come through."""
+    shot = _quad(tmp_path / "under.usda", gravity=0.0, height=-0.5, speed=2.0, end=24)
+    out = tmp_path / "c.usdc"
+    simbake.bake(simbake.load_scene(shot), out, qa=False)
+    stage = _composed(shot, out)
+    heights = [_height(stage, f) for f in range(1, 25)]
+    assert max(heights) <= -(0.1 + 0.01) + 0.003
+    assert max(heights) >= -(0.1 + 0.01) - 0.02  # it got there (0.39 m in 0.2 s)
+
+
+def test_a_mirrored_kit_ground_cube_holds_the_ball(tmp_path, capsys):
+    """Kit's ground: a Cube scaled (-500, 500, 10) cm, Z up, endTimeCode 1e6 (baked with
+    --frames). Its top is z = 0: the 10 cm ball rests at z = 10 cm. The mirror is no
+    refusal: a mirrored box is the same box."""
+    shot = SHOTS / "kit_mirrored_ground.usda"
+    out = tmp_path / "kit.usdc"
+    assert main(["bake", str(shot), "-o", str(out), "-q", "--frames", "0:60"]) == 0
+    stage = _composed(shot, out)
+    z = float(_world(stage, "/World/Sphere", 60)[2, 3])  # centimetres
+    assert z == pytest.approx(10.0, abs=0.3)
+    ground = UsdGeom.Xformable(stage.GetPrimAtPath("/World/GroundCube")).ComputeLocalToWorldTransform(0)
+    assert ground.GetDeterminant() < 0  # it is mirrored, as authored
+
+
+def test_a_sheared_parent_is_baked_into_the_body_shape(tmp_path):
+    """A Cube under a parent [scale (2, 1, 1), rotateZ 30]: its world transform is sheared.
+    It falls rigidly (the composed linear part stays the authored one until it lands) and
+    comes to rest with its visual corners, as pxr composes them, on the ground."""
+    shot = SHOTS / "sheared_parent.usda"
+    out = tmp_path / "c.usda"
+    simbake.bake(replace(simbake.load_scene(shot), substeps=10), out, qa=False)
+    alone = Usd.Stage.Open(str(shot))
+    stage = _composed(shot, out)
+    start = _world(alone, "/World/stretched/crate", 1)
+    for frame in (1, 3):
+        now = _world(stage, "/World/stretched/crate", frame)
+        np.testing.assert_allclose(now[:3, :3], start[:3, :3], atol=1e-6)  # float64 matrices
+        t = (frame - 1) / 24
+        assert now[1, 3] == pytest.approx(start[1, 3] - 0.5 * G * t * (t + 1 / 240), abs=1e-9)
+    corners = np.array([[x, y, z, 1.0] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (-0.1, 0.1)])
+    end = _world(stage, "/World/stretched/crate", 24)
+    lowest = (corners @ end.T)[:, 1].min()
+    # on the ground: the contact tolerance and the QA's penetration threshold, a few mm
+    assert -0.003 <= lowest <= 0.003
+    # and it moved rigidly: the composed shape is the authored one, turned
+    m = end[:3, :3] @ np.linalg.inv(start[:3, :3])
+    np.testing.assert_allclose(m @ m.T, np.eye(3), atol=1e-6)
