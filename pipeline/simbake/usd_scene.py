@@ -635,10 +635,59 @@ class _Reader:
             v = {"X": v[:, [2, 0, 1]], "Y": v[:, [1, 2, 0]], "Z": v}[axis]
             return ("mesh", v @ a.T + t, _wound(np.asarray(mesh.faces, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Mesh):
-            v, f = self._mesh_triangles(prim)
-            return ("mesh", v @ a.T + t, f[:, ::-1] if np.linalg.det(a) < 0 else f)
+            v, f = self._approximated(prim, *self._mesh_triangles(prim))
+            return ("mesh", v @ a.T + t, _wound(f, a))
         raise self.error(path, "", f"a collider of type {prim.GetTypeName() or 'none'} is not supported "
                                    "(Cube, Sphere, Capsule, Cylinder, Mesh, or a static Plane)")
+
+    def _approximated(self, prim, v: np.ndarray, f: np.ndarray):
+        """A mesh collider's physics:approximation (PhysicsMeshCollisionAPI), in its local
+        space, as PhysX reads it (APPROXIMATIONS says what each becomes)."""
+        from pxr import UsdPhysics
+
+        attr = UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr()
+        token = str(attr.Get()) if attr and attr.HasAuthoredValue() else "none"
+        if token not in APPROXIMATIONS:
+            self.warn_once(f"physics:approximation={token}", prim.GetPath(),
+                           f"physics:approximation {token!r} is not one simbake knows "
+                           f"({', '.join(APPROXIMATIONS)}); the mesh is used as it is")
+            return v, f
+        import trimesh
+
+        if token == "convexHull":
+            try:
+                hull = trimesh.Trimesh(v, f, process=False).convex_hull
+            except Exception:  # flat: no volume to hull (qhull refuses); the surface is its own hull
+                return v, f
+            return np.asarray(hull.vertices, dtype=np.float64), np.asarray(hull.faces, dtype=np.int32)
+        if token == "boundingCube":
+            from . import _core
+
+            lo, hi = v.min(axis=0), v.max(axis=0)
+            box, faces = _core.box_mesh(np.maximum(hi - lo, 1e-12), 1)
+            return box + 0.5 * (lo + hi), np.asarray(faces, dtype=np.int32)
+        if token == "boundingSphere":
+            from . import _core
+            from .assets import SPHERE_SUBDIVISIONS
+
+            centre, radius = trimesh.nsphere.minimum_nsphere(v)
+            ball, faces = _core.sphere_mesh(float(radius), SPHERE_SUBDIVISIONS)
+            return ball + centre, np.asarray(faces, dtype=np.int32)
+        return v, f  # none, meshSimplification, convexDecomposition, sdf: the mesh itself
+
+    def _voxel_size(self, colliders, shape) -> float:
+        """PhysX's physxSDFMeshCollision:sdfResolution (voxels along the longest extent) as
+        the level set's voxel size (m); 0: automatic."""
+        for prim in colliders:
+            attr = prim.GetAttribute("physxSDFMeshCollision:sdfResolution")
+            if not (attr and attr.HasAuthoredValue()) or shape.mesh_vertices is None:
+                continue
+            value = attr.Get()
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                raise self.error(prim.GetPath(), "physxSDFMeshCollision:sdfResolution", f"must be a number > 0, got {value!r}")
+            v = np.asarray(shape.mesh_vertices)
+            return float((v.max(axis=0) - v.min(axis=0)).max()) / float(value)
+        return 0.0
 
     def _axis(self, prim, schema) -> str:
         """A Capsule's, Cylinder's or Plane's axis token: X, Y or Z."""
@@ -819,6 +868,7 @@ class _Reader:
         keys = self._keys(prim) if kinematic else ()
         body = Body(
             name=self._name(path, used), shape=shape, density=density, mass=mass,
+            voxel_size=self._voxel_size([c for c, _ in colliders], shape),
             position=position, orientation=orientation,
             linear_velocity=self.direction(_decimals(d.linearVelocity), self.mpu),
             angular_velocity=self.direction(_decimals(d.angularVelocity), math.pi / 180.0),
@@ -1007,6 +1057,7 @@ class _Reader:
         self._body_keys(index, path, path, self.material_path)
         position, orientation = self.pose(r, t)
         return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
+                    voxel_size=self._voxel_size([prim], shape),
                     position=position, orientation=orientation, linear_velocity=(0.0, 0.0, 0.0),
                     angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
                     kinematic=True, prim_path=str(path))
@@ -1075,6 +1126,20 @@ class _Reader:
             cloths.append(cloth)
         return cloths, targets
 
+
+# physics:approximation of a mesh collider (UsdPhysics.MeshCollisionAPI), as simbake reads it:
+APPROXIMATIONS = {
+    "none": "the mesh itself (a closed mesh is a solid; an open static one a two-sided surface)",
+    "meshSimplification": "the mesh itself: simbake does not simplify (its level set is already "
+                          "a resolution-bound approximation)",
+    "convexHull": "the convex hull of the mesh's points (trimesh)",
+    "convexDecomposition": "the mesh itself: simbake's level sets take concave shapes whole, which "
+                           "is what an exact decomposition would give",
+    "boundingSphere": "the smallest sphere around the mesh's points (trimesh's minimum_nsphere)",
+    "boundingCube": "the box around the mesh's points along the mesh's own axes",
+    "sdf": "the mesh's signed distance field, simbake's own representation; "
+           "physxSDFMeshCollision:sdfResolution sets its voxels across the longest extent",
+}
 
 _CLOTH_KEYS = ("area_density", "stretch_stiffness", "bend_stiffness", "damping", "strain_limit",
                "friction", "thickness", "poisson_ratio")

@@ -449,3 +449,73 @@ def test_a_sheared_parent_is_baked_into_the_body_shape(tmp_path):
     # and it moved rigidly: the composed shape is the authored one, turned
     m = end[:3, :3] @ np.linalg.inv(start[:3, :3])
     np.testing.assert_allclose(m @ m.T, np.eye(3), atol=1e-6)
+
+
+# --------------------------------------------------------------------------------------------
+# 5. physics:approximation
+# --------------------------------------------------------------------------------------------
+
+def _notched_block():
+    """A block 1 x 0.4 x 1 m (x, y, z) on y = 0 with a notch 0.4 wide and 0.3 deep down the
+    middle of its top: closed, concave. Its hull and its box both have their top at y = 0.4;
+    the notch's floor is at y = 0.1; its smallest enclosing sphere is centred at (0, 0.2, 0)
+    with radius sqrt(0.5^2 + 0.2^2 + 0.5^2) (the block's corners)."""
+    import trimesh
+
+    outline = np.array([[-0.5, 0], [-0.2, 0], [0.2, 0], [0.5, 0], [0.5, 0.4], [0.2, 0.4], [0.2, 0.1],
+                        [-0.2, 0.1], [-0.2, 0.4], [-0.5, 0.4]])
+    caps = np.array([[0, 1, 7], [0, 7, 8], [0, 8, 9], [1, 2, 6], [1, 6, 7], [3, 4, 5], [3, 5, 6], [3, 6, 2]])
+    mesh = trimesh.creation.extrude_triangulation(outline, caps, 1.0)
+    v = np.asarray(mesh.vertices) - [0.0, 0.0, 0.5]
+    assert mesh.is_watertight and mesh.volume == pytest.approx(0.4 - 0.12)
+    return v, np.asarray(mesh.faces)
+
+
+def _notch_shot(path: Path, approximation: str, drop: float) -> Path:
+    v, f = _notched_block()
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, "Y")
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(30)
+    stage.SetTimeCodesPerSecond(24)
+    UsdPhysics.Scene.Define(stage, "/World/physicsScene")
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+    block = UsdGeom.Mesh.Define(stage, "/World/block")
+    block.CreatePointsAttr([Gf.Vec3f(*p) for p in v])
+    block.CreateFaceVertexCountsAttr([3] * len(f))
+    block.CreateFaceVertexIndicesAttr([int(i) for i in f.reshape(-1)])
+    UsdPhysics.CollisionAPI.Apply(block.GetPrim())
+    UsdPhysics.MeshCollisionAPI.Apply(block.GetPrim()).CreateApproximationAttr(approximation)
+    ball = UsdGeom.Sphere.Define(stage, "/World/ball")
+    ball.CreateRadiusAttr(0.1)
+    ball.AddTranslateOp().Set(Gf.Vec3d(0, drop, 0))
+    UsdPhysics.RigidBodyAPI.Apply(ball.GetPrim())
+    UsdPhysics.CollisionAPI.Apply(ball.GetPrim())
+    stage.GetRootLayer().Save()
+    return path
+
+
+SPHERE_TOP = 0.2 + float(np.sqrt(0.5 ** 2 + 0.2 ** 2 + 0.5 ** 2))
+
+
+@pytest.mark.parametrize("approximation, rest", [
+    ("convexHull", 0.4 + 0.1),           # on the hull, over the notch: not in it
+    ("boundingCube", 0.4 + 0.1),
+    ("boundingSphere", SPHERE_TOP + 0.1),
+    ("none", 0.1 + 0.1),                 # the mesh itself: down in the notch
+    ("meshSimplification", 0.1 + 0.1),
+    ("convexDecomposition", 0.1 + 0.1),
+    ("sdf", 0.1 + 0.1),
+])
+def test_each_approximation_is_the_shape_the_ball_rests_on(tmp_path, approximation, rest):
+    """A ball dropped over the notch of a concave block: it rests on the hull (or box, or
+    sphere) when the block is approximated so, in the notch when it is the mesh. Rest
+    heights are the analytic tops plus the radius; 5 mm covers the block's level set
+    (voxel 1/64 of a metre, ~0.2 voxel error at flat faces) and the resting contact."""
+    shot = _notch_shot(tmp_path / "notch.usda", approximation, drop=rest + 0.15)
+    out = tmp_path / "c.usdc"
+    simbake.bake(simbake.load_scene(shot), out, qa=False)
+    stage = _composed(shot, out)
+    assert _height(stage, 30) == pytest.approx(rest, abs=0.005)
+    assert abs(_world(stage, "/World/ball", 30)[0, 3]) < 0.01  # it stayed over the notch
