@@ -111,10 +111,10 @@ def parse_frames(scene_path: str, text: str) -> tuple[int, int]:
     return start, end
 
 
-def _check(path: str) -> int:
+def _check(path: str, strict: bool = False) -> int:
     from .check import check_cache
 
-    problems = check_cache(path)
+    problems = check_cache(path, strict=strict)
     for problem in problems:
         print(problem)
     if problems:
@@ -204,6 +204,8 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     c = sub.add_parser("check", help="validate a USD cache")
     c.add_argument("cache")
+    c.add_argument("--strict", action="store_true",
+                   help="a USD shot's cache: also every finding of OpenUSD's validators on the input")
     pv = sub.add_parser("preview", help="render a cache headless: a contact sheet (.png) or a movie (.mp4, .gif)")
     pv.add_argument("cache")
     pv.add_argument("-o", "--output", help="OUT.png (contact sheet), OUT.mp4 or OUT.gif (movie); default CACHE.mp4")
@@ -240,7 +242,7 @@ def _main(argv: list[str] | None) -> int:
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":
-            return _check(args.cache)
+            return _check(args.cache, args.strict)
         if args.command == "report":
             return _report(args.cache, args.output)
         if args.command == "preview":

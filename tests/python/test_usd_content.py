@@ -519,3 +519,62 @@ def test_each_approximation_is_the_shape_the_ball_rests_on(tmp_path, approximati
     stage = _composed(shot, out)
     assert _height(stage, 30) == pytest.approx(rest, abs=0.005)
     assert abs(_world(stage, "/World/ball", 30)[0, 3]) < 0.01  # it stayed over the notch
+
+
+# --------------------------------------------------------------------------------------------
+# 6. simbake check judges what simbake authored; --strict adds the input's findings
+# --------------------------------------------------------------------------------------------
+
+def test_check_passes_a_kit_shot_and_strict_adds_the_inputs_findings(tmp_path, capsys):
+    """The Kit-style input has an MDL asset that does not resolve here and a Mesh without an
+    authored extent: OpenUSD's validators on the input alone find the first, our extent rule
+    the second. Neither is simbake's: `check` passes the --shot stage; `--strict` fails it with
+    exactly what pxr's validators say of the input, plus the extent."""
+    shot_in = SHOTS / "kit_mirrored_ground.usda"
+    cache, shot = tmp_path / "kit.usdc", tmp_path / "kit.shot.usda"
+    assert main(["bake", str(shot_in), "-o", str(cache), "--shot", str(shot), "-q", "--frames", "0:6"]) == 0
+    capsys.readouterr()
+    assert main(["check", str(shot)]) == 0
+    assert capsys.readouterr().out.strip() == f"{shot}: ok"
+    assert main(["check", "--strict", str(shot)]) == 1
+    out = capsys.readouterr().out
+    from pxr import UsdValidation
+
+    registry = UsdValidation.ValidationRegistry()
+    alone = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators()).Validate(Usd.Stage.Open(str(shot_in)))
+    errors = {e.GetIdentifier() for e in alone if e.GetType() == UsdValidation.ValidationErrorType.Error}
+    assert any("UnresolvableDependency" in str(i) for i in errors)
+    reported = {line.split("usd error: ")[1].split(" ")[0].rstrip(":") for line in out.splitlines() if "usd error: " in line}
+    assert reported == {str(i) for i in errors}, (reported, errors)
+    assert "/World/Decor/Cone: points without an authored extent" in out
+
+
+# --------------------------------------------------------------------------------------------
+# 7. the corpus: every scene under tests/data/shots bakes cleanly
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("shot", sorted(p.name for p in SHOTS.glob("*.usd*")))
+def test_every_corpus_shot_bakes_without_refusal_or_loss(tmp_path, capsys, shot):
+    """No refusal, no "left out" warning, nothing under the ground by more than the QA
+    threshold, nothing NaN: 24 frames from each stage's start (or 0 when it has none)."""
+    from simbake.qa import BODY_PENETRATION
+
+    path = SHOTS / shot
+    stage = Usd.Stage.Open(str(path))
+    start = int(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else 0
+    cache = tmp_path / "c.usdc"
+    assert main(["bake", str(path), "-o", str(cache), "-q", "--frames", f"{start}:{start + 24}"]) == 0
+    err = capsys.readouterr().err
+    assert "left out" not in err and "error" not in err, err
+    composed = _composed(path, cache)
+    mpu = UsdGeom.GetStageMetersPerUnit(composed)
+    axis = 1 if UsdGeom.GetStageUpAxis(composed) == "Y" else 2
+    for prim in composed.Traverse():
+        if not prim.HasAPI(UsdPhysics.RigidBodyAPI) or not prim.IsA(UsdGeom.Gprim):
+            continue
+        for frame in range(start, start + 25):
+            world = _world(composed, prim.GetPath(), frame)
+            assert np.isfinite(world).all(), (prim.GetPath(), frame)
+            # the lowest point of the body's bound (world, metres) is above the ground (z or y = 0)
+            bound = UsdGeom.Imageable(prim).ComputeWorldBound(frame, "default").ComputeAlignedRange()
+            assert bound.GetMin()[axis] * mpu >= -BODY_PENETRATION, (prim.GetPath(), frame, bound)
