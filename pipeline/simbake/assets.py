@@ -158,22 +158,25 @@ def write_level_set(level_set: "_core.LevelSet", path: Path, metadata: dict[str,
 
 
 def level_set_cache_path(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
-                         cache: Path | None = None) -> Path:
-    """Where the level set of this mesh at this voxel size is cached (it may not exist yet)."""
+                         cache: Path | None = None, thickness: float = 0.0) -> Path:
+    """Where the level set of this mesh at this voxel size is cached (it may not exist yet);
+    `thickness` > 0: its two-sided shell of that half-thickness (LevelSet.bake_shell)."""
     cache = cache_dir() if cache is None else cache
     digest = hashlib.sha256()
     digest.update(CACHE_FORMAT.encode())
     digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
     digest.update(np.ascontiguousarray(triangles, dtype="<i4").tobytes())
     digest.update(repr(float(voxel_size)).encode())
+    if thickness > 0:
+        digest.update(f"shell {float(thickness)!r}".encode())
     return cache / "levelsets" / f"{digest.hexdigest()}.vdb"
 
 
 def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
-                   cache: Path | None = None) -> "_core.LevelSet":
+                   cache: Path | None = None, thickness: float = 0.0) -> "_core.LevelSet":
     """The mesh's level set, read from the cache when this mesh and voxel size were baked
     before (and the entry says so), else baked and stored."""
-    path = level_set_cache_path(vertices, triangles, voxel_size, cache)
+    path = level_set_cache_path(vertices, triangles, voxel_size, cache, thickness)
     key = path.stem
     if path.is_file():
         try:
@@ -182,7 +185,10 @@ def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: floa
                 return entry
         except RuntimeError:
             pass  # unreadable cache entry: bake again and replace it
-    level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
+    if thickness > 0:
+        level_set = _core.LevelSet.bake_shell(vertices, triangles, voxel_size, thickness)
+    else:
+        level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_level_set(level_set, path, {CACHE_KEY: key})
@@ -275,7 +281,7 @@ def _load_shell(body: Body, vertices: np.ndarray, triangles: np.ndarray, with_le
     h = body.voxel_size or shell_voxel_size(vertices, triangles, body.shape.thickness)
     thickness = max(body.shape.thickness, h)
     props = {"volume": 1.0, "center": 0.5 * (lo + hi), "inertia": np.eye(3)}
-    level_set = _core.LevelSet.bake_shell(vertices, triangles, h, thickness) if with_level_set else None
+    level_set = bake_level_set(vertices, triangles, h, thickness=thickness) if with_level_set else None
     normals = _core.vertex_normals(vertices, triangles)
     # samples 1/64 of its longest extent apart (the thickness at least)
     spacing = max(float((hi - lo).max()) / 64.0, thickness)

@@ -224,7 +224,8 @@ def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Output
     for index, body, asset in wanted:
         name = written.get(id(asset.level_set))
         if name is None:
-            cached = level_set_cache_path(asset.vertices, asset.triangles, asset.voxel_size)
+            shell = max(body.shape.thickness, asset.voxel_size) if body.shape.thickness > 0 else 0.0
+            cached = level_set_cache_path(asset.vertices, asset.triangles, asset.voxel_size, thickness=shell)
             stem = body.shape.mesh_path.stem if body.shape.mesh_path is not None else body.name
             name = f"{stem}.{cached.stem[:12]}.vdb"
             if cached.is_file():

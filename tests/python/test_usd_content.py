@@ -578,3 +578,16 @@ def test_every_corpus_shot_bakes_without_refusal_or_loss(tmp_path, capsys, shot)
             # the lowest point of the body's bound (world, metres) is above the ground (z or y = 0)
             bound = UsdGeom.Imageable(prim).ComputeWorldBound(frame, "default").ComputeAlignedRange()
             assert bound.GetMin()[axis] * mpu >= -BODY_PENETRATION, (prim.GetPath(), frame, bound)
+
+
+def test_same_open_collider_shot_same_bytes(tmp_path):
+    """Same scene in, same bytes out: the open quad's shell grid (baked, not disk-cached) and
+    the cache written beside it."""
+    shot = SHOTS / "box_on_quad.usda"
+    for run in ("a", "b"):  # one name in two folders: the level set's path is relative to it
+        (tmp_path / run).mkdir()
+        assert main(["bake", str(shot), "-o", str(tmp_path / run / "c.usdc"), "-q", "--frames", "1:6"]) == 0
+    assert (tmp_path / "a" / "c.usdc").read_bytes() == (tmp_path / "b" / "c.usdc").read_bytes()
+    vdbs = [sorted((tmp_path / run / "c.vdb").iterdir()) for run in ("a", "b")]
+    assert [p.name for p in vdbs[0]] == [p.name for p in vdbs[1]] and vdbs[0]
+    assert all(x.read_bytes() == y.read_bytes() for x, y in zip(*vdbs))
