@@ -233,6 +233,16 @@ void bind_level_sets(py::module_& m) {
             }
             return LevelSet{grid, grid};
           }, py::arg("vertices"), py::arg("triangles"), py::arg("voxel_size"))
+      .def_static("bake_shell", [](const Points& v, const Triangles& t, double voxel_size, double thickness) {
+            to_mesh(v, t);
+            std::shared_ptr<VdbLevelSet> grid;
+            {
+              py::gil_scoped_release release;
+              grid = VdbLevelSet::bake_shell(v, t, voxel_size, thickness);
+            }
+            return LevelSet{grid, grid};
+          }, py::arg("vertices"), py::arg("triangles"), py::arg("voxel_size"), py::arg("thickness"),
+          "Any triangle soup (open, non-manifold) as a two-sided shell: phi = |d| - thickness (m)")
       .def_static("read", [](const std::string& path) {
             auto grid = VdbLevelSet::read(path);
             return LevelSet{grid, grid};

@@ -19,6 +19,7 @@
 #include "levelset/vdb_levelset.h"
 
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/ChangeBackground.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/MeshToVolume.h>
 
@@ -114,40 +115,60 @@ struct VdbLevelSet::Impl {
 VdbLevelSet::VdbLevelSet(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 VdbLevelSet::~VdbLevelSet() = default;
 
+namespace {
+
+// The mesh checked and put in index space (voxel centres at integer coordinates)
+struct IndexMesh {
+  std::vector<openvdb::Vec3s> points;
+  std::vector<openvdb::Vec3I> triangles;
+  Vec3 lo, hi;  // bounding box (m)
+};
+
+IndexMesh index_mesh(const char* who, const Points& vertices, const Triangles& triangles,
+                     double voxel_size, int exterior_band) {
+  const std::string w(who);
+  if (!(voxel_size > 0.0) || !std::isfinite(voxel_size))
+    throw std::invalid_argument(w + ": voxel size must be a positive finite number");
+  if (exterior_band < 3)
+    throw std::invalid_argument(w + ": exterior band must be at least 3 voxels");
+  if (vertices.rows() == 0 || triangles.rows() == 0)
+    throw std::invalid_argument(w + ": empty mesh (no vertices or no triangles)");
+  if (!vertices.allFinite())
+    throw std::invalid_argument(w + ": vertex coordinates must be finite");
+  const Eigen::Index n = vertices.rows();
+  if (triangles.minCoeff() < 0 || triangles.maxCoeff() >= n)
+    throw std::invalid_argument(w + ": triangle vertex index out of range [0, " +
+                                std::to_string(n) + ")");
+  IndexMesh m;
+  m.lo = vertices.colwise().minCoeff();
+  m.hi = vertices.colwise().maxCoeff();
+  if (std::max(m.lo.cwiseAbs().maxCoeff(), m.hi.cwiseAbs().maxCoeff()) / voxel_size > 1e7)
+    throw std::invalid_argument(w + ": voxel size too small for the mesh extent");
+  m.points.resize(static_cast<std::size_t>(n));
+  for (Eigen::Index i = 0; i < n; ++i)
+    m.points[i] = openvdb::Vec3s(float(vertices(i, 0) / voxel_size),
+                                 float(vertices(i, 1) / voxel_size),
+                                 float(vertices(i, 2) / voxel_size));
+  m.triangles.resize(static_cast<std::size_t>(triangles.rows()));
+  for (Eigen::Index t = 0; t < triangles.rows(); ++t)
+    m.triangles[t] = openvdb::Vec3I(openvdb::Index32(triangles(t, 0)), openvdb::Index32(triangles(t, 1)),
+                                    openvdb::Index32(triangles(t, 2)));
+  return m;
+}
+
+}  // namespace
+
 std::shared_ptr<VdbLevelSet> VdbLevelSet::bake(const Points& vertices,
                                                const Triangles& triangles, double voxel_size,
                                                int exterior_band) {
-  // validate the input
-  if (!(voxel_size > 0.0) || !std::isfinite(voxel_size))
-    throw std::invalid_argument("VdbLevelSet::bake: voxel size must be a positive finite number");
-  if (exterior_band < 3)
-    throw std::invalid_argument("VdbLevelSet::bake: exterior band must be at least 3 voxels");
-  if (vertices.rows() == 0 || triangles.rows() == 0)
-    throw std::invalid_argument("VdbLevelSet::bake: empty mesh (no vertices or no triangles)");
-  if (!vertices.allFinite())
-    throw std::invalid_argument("VdbLevelSet::bake: vertex coordinates must be finite");
-  const Eigen::Index n = vertices.rows();
-  if (triangles.minCoeff() < 0 || triangles.maxCoeff() >= n)
-    throw std::invalid_argument("VdbLevelSet::bake: triangle vertex index out of range [0, " +
-                                std::to_string(n) + ")");
-  const Vec3 lo = vertices.colwise().minCoeff(), hi = vertices.colwise().maxCoeff();
-  if (std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff()) / voxel_size > 1e7)
-    throw std::invalid_argument("VdbLevelSet::bake: voxel size too small for the mesh extent");
+  IndexMesh m = index_mesh("VdbLevelSet::bake", vertices, triangles, voxel_size, exterior_band);
+  const Vec3 lo = m.lo, hi = m.hi;
+  std::vector<openvdb::Vec3s>& points = m.points;
+  std::vector<openvdb::Vec3I>& tris = m.triangles;
 
   initialize_openvdb();
-
-  // mesh in index space (voxel centres at integer coordinates)
   const openvdb::math::Transform::Ptr xform =
       openvdb::math::Transform::createLinearTransform(voxel_size);
-  std::vector<openvdb::Vec3s> points(static_cast<std::size_t>(n));
-  for (Eigen::Index i = 0; i < n; ++i)
-    points[i] = openvdb::Vec3s(float(vertices(i, 0) / voxel_size),
-                               float(vertices(i, 1) / voxel_size),
-                               float(vertices(i, 2) / voxel_size));
-  std::vector<openvdb::Vec3I> tris(static_cast<std::size_t>(triangles.rows()));
-  for (Eigen::Index t = 0; t < triangles.rows(); ++t)
-    tris[t] = openvdb::Vec3I(openvdb::Index32(triangles(t, 0)), openvdb::Index32(triangles(t, 1)),
-                             openvdb::Index32(triangles(t, 2)));
 
   // signed distance with a thin exterior band and an interior band deeper than any
   // interior point (half the largest extent bounds the depth), so the interior is filled
@@ -161,6 +182,36 @@ std::shared_ptr<VdbLevelSet> VdbLevelSet::bake(const Points& vertices,
   if (grid->activeVoxelCount() == 0)
     throw std::invalid_argument("VdbLevelSet::bake: the mesh produced no voxels (degenerate mesh?)");
 
+  return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
+}
+
+std::shared_ptr<VdbLevelSet> VdbLevelSet::bake_shell(const Points& vertices,
+                                                     const Triangles& triangles, double voxel_size,
+                                                     double thickness, int exterior_band) {
+  IndexMesh m = index_mesh("VdbLevelSet::bake_shell", vertices, triangles, voxel_size, exterior_band);
+  if (!(thickness >= voxel_size) || !std::isfinite(thickness))
+    throw std::invalid_argument("VdbLevelSet::bake_shell: thickness must be finite and at least the voxel size");
+
+  initialize_openvdb();
+  const openvdb::math::Transform::Ptr xform =
+      openvdb::math::Transform::createLinearTransform(voxel_size);
+
+  // unsigned distance |d| in a band of thickness + exterior_band voxels around every triangle
+  const float band = float(thickness / voxel_size + exterior_band);
+  const openvdb::tools::QuadAndTriangleDataAdapter<openvdb::Vec3s, openvdb::Vec3I> mesh(
+      m.points, m.triangles);
+  FloatGrid::Ptr grid = openvdb::tools::meshToVolume<FloatGrid>(
+      mesh, *xform, band, band, openvdb::tools::UNSIGNED_DISTANCE_FIELD);
+  if (grid->activeVoxelCount() == 0)
+    throw std::invalid_argument("VdbLevelSet::bake_shell: the mesh produced no voxels (degenerate mesh?)");
+
+  // phi = |d| - thickness, the background too: it stays exterior_band voxels outside the
+  // zero level set, as for bake(), so bounds() and exterior_reach() hold unchanged
+  const float t = float(thickness);
+  for (auto it = grid->beginValueOn(); it; ++it) it.setValue(*it - t);
+  openvdb::tools::changeBackground(grid->tree(), grid->background() - t);
+  grid->setName(kGridName);
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
   return std::shared_ptr<VdbLevelSet>(new VdbLevelSet(std::make_unique<Impl>(grid)));
 }
 

@@ -1,4 +1,5 @@
-// A closed triangle mesh baked into an OpenVDB FloatGrid signed distance field.
+// A closed triangle mesh baked into an OpenVDB FloatGrid signed distance field (or any
+// triangle soup into a two-sided shell of a given thickness, bake_shell).
 //
 // This is the only header of the core that knows OpenVDB exists (the grid lives behind a
 // pimpl). The grid is a narrow band outside the surface and filled all the way through the
@@ -21,6 +22,13 @@ class VdbLevelSet final : public SignedDistance {
   // exterior_band: width of the band outside the surface, in voxels (>= 3).
   static std::shared_ptr<VdbLevelSet> bake(const Points& vertices, const Triangles& triangles,
                                            double voxel_size, int exterior_band = 3);
+  // Bake any triangle soup (open, non-manifold, self-intersecting: a single-quad ground) as a
+  // two-sided shell: phi = |d| - thickness, d the unsigned distance to the nearest triangle
+  // (m). Negative only within `thickness` of the surface; thickness >= voxel_size so that
+  // the trilinear interpolant of |d| (off by up to h/2 at the surface) stays negative there.
+  static std::shared_ptr<VdbLevelSet> bake_shell(const Points& vertices, const Triangles& triangles,
+                                                 double voxel_size, double thickness,
+                                                 int exterior_band = 3);
   // Read the first FloatGrid of a .vdb file written by write() (or any level-set .vdb)
   static std::shared_ptr<VdbLevelSet> read(const std::string& path);
   // Write the grid (named "surface", class level set) to a .vdb file any OpenVDB reader opens,

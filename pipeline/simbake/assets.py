@@ -41,6 +41,9 @@ SAMPLES_ACROSS = 4       # mesh bodies: edge samples no further apart than the t
 VOXELS_ACROSS = 64       # automatic voxel size: the longest extent over this ...
 MIN_VOXELS_THIN = 6      # ... but at least this many voxels across the thinnest extent
 MAX_VOXELS = 5e7         # a filled grid of 5e7 voxels takes ~0.75 GB
+SHELL_THICKNESS = 0.01   # m: half-thickness of an open static collider (a two-sided surface)
+SHELL_VOXELS = 2e6       # voxels an open collider's shell may take (it is a band around a surface)
+SHELL_VOXELS_ACROSS = 1024  # ... and voxels need not be finer than its longest extent over this
 CACHE_FORMAT = "levelset-v1"
 CACHE_KEY = "simbake:key"     # grid metadata: the cache key the entry was baked for
 
@@ -113,6 +116,16 @@ def load_mesh(path: Path, file: str | Path, key: str) -> tuple[np.ndarray, np.nd
     return vertices, triangles
 
 
+def shell_voxel_size(vertices: np.ndarray, triangles: np.ndarray, thickness: float) -> float:
+    """An open collider's voxel size: no coarser than its thickness (the shell must be
+    resolved: |d| interpolated trilinearly is off by up to h/2 at the surface), but coarse
+    enough that the band of ~2 (t/h + 3) voxels around its area fits SHELL_VOXELS."""
+    a, b, c = (vertices[triangles[:, i]] for i in range(3))
+    area = 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
+    return max(thickness, extent / SHELL_VOXELS_ACROSS, math.sqrt(8.0 * area / SHELL_VOXELS))
+
+
 def automatic_voxel_size(vertices: np.ndarray) -> float:
     extent = vertices.max(axis=0) - vertices.min(axis=0)
     return float(min(extent.max() / VOXELS_ACROSS, extent.min() / MIN_VOXELS_THIN))
@@ -145,22 +158,25 @@ def write_level_set(level_set: "_core.LevelSet", path: Path, metadata: dict[str,
 
 
 def level_set_cache_path(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
-                         cache: Path | None = None) -> Path:
-    """Where the level set of this mesh at this voxel size is cached (it may not exist yet)."""
+                         cache: Path | None = None, thickness: float = 0.0) -> Path:
+    """Where the level set of this mesh at this voxel size is cached (it may not exist yet);
+    `thickness` > 0: its two-sided shell of that half-thickness (LevelSet.bake_shell)."""
     cache = cache_dir() if cache is None else cache
     digest = hashlib.sha256()
     digest.update(CACHE_FORMAT.encode())
     digest.update(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
     digest.update(np.ascontiguousarray(triangles, dtype="<i4").tobytes())
     digest.update(repr(float(voxel_size)).encode())
+    if thickness > 0:
+        digest.update(f"shell {float(thickness)!r}".encode())
     return cache / "levelsets" / f"{digest.hexdigest()}.vdb"
 
 
 def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: float,
-                   cache: Path | None = None) -> "_core.LevelSet":
+                   cache: Path | None = None, thickness: float = 0.0) -> "_core.LevelSet":
     """The mesh's level set, read from the cache when this mesh and voxel size were baked
     before (and the entry says so), else baked and stored."""
-    path = level_set_cache_path(vertices, triangles, voxel_size, cache)
+    path = level_set_cache_path(vertices, triangles, voxel_size, cache, thickness)
     key = path.stem
     if path.is_file():
         try:
@@ -169,7 +185,10 @@ def bake_level_set(vertices: np.ndarray, triangles: np.ndarray, voxel_size: floa
                 return entry
         except RuntimeError:
             pass  # unreadable cache entry: bake again and replace it
-    level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
+    if thickness > 0:
+        level_set = _core.LevelSet.bake_shell(vertices, triangles, voxel_size, thickness)
+    else:
+        level_set = _core.LevelSet.bake(vertices, triangles, voxel_size)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_level_set(level_set, path, {CACHE_KEY: key})
@@ -234,6 +253,8 @@ def _load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bo
             file, key = (file, shape.mesh_source) if shape.mesh_source else (file, key)
         else:
             vertices, triangles = load_mesh(shape.mesh_path, file, f"{key}.mesh")
+        if shape.thickness > 0:  # an open static collider: a two-sided shell (no inside, no mass)
+            return _load_shell(body, vertices, triangles, with_level_set)
         try:
             props = _core.mass_properties(vertices, triangles)
         except ValueError as error:
@@ -249,6 +270,23 @@ def _load_body(scene: Scene, index: int, body: Body, with_level_set: bool) -> Bo
         extent = vertices.max(axis=0) - vertices.min(axis=0)
         samples = _core.surface_samples(vertices, triangles, float(extent.min()) / SAMPLES_ACROSS)
     return BodyAsset(vertices, triangles, normals, samples, props, level_set, voxel_size)
+
+
+def _load_shell(body: Body, vertices: np.ndarray, triangles: np.ndarray, with_level_set: bool) -> BodyAsset:
+    """An open or non-manifold kinematic collider: phi = |d| - t, t its half-thickness raised
+    to the voxel size when the surface is too large for a finer grid (PhysX treats such a
+    mesh as a two-sided surface; bodies rest on it at t). It has no inside, so no mass: its
+    mass properties are a placeholder (kinematic bodies never use them) centred on its box."""
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    h = body.voxel_size or shell_voxel_size(vertices, triangles, body.shape.thickness)
+    thickness = max(body.shape.thickness, h)
+    props = {"volume": 1.0, "center": 0.5 * (lo + hi), "inertia": np.eye(3)}
+    level_set = bake_level_set(vertices, triangles, h, thickness=thickness) if with_level_set else None
+    normals = _core.vertex_normals(vertices, triangles)
+    # samples 1/64 of its longest extent apart (the thickness at least)
+    spacing = max(float((hi - lo).max()) / 64.0, thickness)
+    samples = _core.surface_samples(vertices, triangles, spacing)
+    return BodyAsset(vertices, triangles, normals, samples, props, level_set, h if with_level_set else 0.0)
 
 
 def load_assets(scene: Scene) -> list[BodyAsset]:

@@ -24,6 +24,12 @@
   - every point-based prim has an ``extent`` that contains its points at every frame;
   - every ``xformOp:orient`` quaternion has unit length (within 1e-5).
 
+A USD shot's cache is judged on what simbake authored: OpenUSD's findings whose sites are
+prims, properties or layers simbake wrote, and our rules on the attributes and point-based
+prims its layers author (an input's own unresolved MDL asset or unauthored extent is the
+input's business). ``strict=True`` (``simbake check --strict``) adds every finding of
+OpenUSD's validators on the whole composed stage, the input's included.
+
 Problems repeated over many frames are reported once per attribute (count and first frame).
 """
 
@@ -47,8 +53,9 @@ _ARRAY_OF = {Gf.Vec2d: Vt.Vec2dArray, Gf.Vec3d: Vt.Vec3dArray, Gf.Vec4d: Vt.Vec4
              Gf.Matrix4d: Vt.Matrix4dArray, Gf.Matrix3d: Vt.Matrix3dArray}
 
 
-def check_cache(path: str | Path, *, warnings: bool = True) -> list[str]:
-    """Return every problem found in the USD cache at ``path``; empty if it is fine."""
+def check_cache(path: str | Path, *, warnings: bool = True, strict: bool = False) -> list[str]:
+    """Return every problem found in the USD cache at ``path``; empty if it is fine. A shot's
+    cache: what simbake authored, and with `strict` what OpenUSD's validators say of the input."""
     path = Path(path)
     if not path.is_file():
         return [f"{path}: no such file" if not path.exists() else f"{path}: not a file"]
@@ -60,8 +67,9 @@ def check_cache(path: str | Path, *, warnings: bool = True) -> list[str]:
         return [f"{path}: cannot open as USD"]
 
     problems: list[str] = []
-    problems += _validators(stage, path, warnings)
     shot = _is_shot(stage)
+    judged = shot and not strict  # only what simbake authored
+    problems += _validators(stage, path, warnings, _site_is_ours if judged else None)
     start, end = _metadata(stage, path, problems, shot)
     frames = None
     if start is not None and end is not None:
@@ -71,8 +79,12 @@ def check_cache(path: str | Path, *, warnings: bool = True) -> list[str]:
             if attr.HasAuthoredValue() or attr.GetNumTimeSamples():
                 # a shot's own animation (its samples where it put them) is not simbake's to judge
                 ours = not shot or _samples_are_ours(attr)
+                if judged and not _authored_by_us(attr.GetPropertyStack()):
+                    continue  # the input's own value
                 _check_attribute(attr, frames if ours else None, path, problems)
         if prim.IsA(UsdGeom.PointBased):
+            if judged and not _authored_by_us(UsdGeom.PointBased(prim).GetPointsAttr().GetPropertyStack()):
+                continue  # the input's own mesh (its extent is the input's business)
             _check_extent(UsdGeom.PointBased(prim), path, problems)
     return problems
 
@@ -99,27 +111,56 @@ def _open_fresh(path: Path):
     return Usd.Stage.Open(layer, Usd.Stage.LoadAll)
 
 
-def _validators(stage, path: Path, warnings: bool) -> list[str]:
+def _authored_by_us(specs) -> bool:
+    """Whether any of these specs (a prim's or property's stack) is in a layer simbake wrote."""
+    return any(_ours(spec.layer) for spec in specs)
 
+
+def _site_is_ours(err) -> bool:
+    """A validator finding about something simbake authored: a site on a prim or property with
+    an opinion in simbake's layers, or on one of those layers. A finding with no such site
+    (a stage-wide one, an input's unresolved asset) is the input's."""
+    for site in err.GetSites():
+        if site.IsProperty() and _authored_by_us(site.GetProperty().GetPropertyStack()):
+            return True
+        if site.IsPrim() and site.GetPrim() and not site.GetPrim().IsPseudoRoot() \
+                and _authored_by_us(site.GetPrim().GetPrimStack()):
+            return True
+        layer = site.GetLayer() if hasattr(site, "GetLayer") else None
+        if layer is not None and _ours(layer):
+            return True
+    return False
+
+
+def _validators(stage, path: Path, warnings: bool, keep=None) -> list[str]:
+    from .usd_diagnostics import trapped
+
+    with trapped():  # OpenUSD's own warnings (an unresolved asset) are findings, not stderr
+        found = list(_validate(stage))
+    return [line for err, line in ((e, _finding(e, path, warnings)) for e in found)
+            if line is not None and (keep is None or keep(err))]
+
+
+def _validate(stage):
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    return UsdValidation.ValidationContext(validators).Validate(stage)
+
+
+def _finding(err, path: Path, warnings: bool) -> str | None:
     kinds = {UsdValidation.ValidationErrorType.Error: "error"}
     if warnings:
         kinds[UsdValidation.ValidationErrorType.Warn] = "warning"
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    out = []
-    for err in UsdValidation.ValidationContext(validators).Validate(stage):
-        kind = kinds.get(err.GetType())
-        if kind is None:
-            continue
-        sites = []
-        for site in err.GetSites():
-            if site.IsProperty():
-                sites.append(str(site.GetProperty().GetPath()))
-            elif site.IsPrim():
-                sites.append(str(site.GetPrim().GetPath()))
-        where = f" at {', '.join(sites)}" if sites and sites != ["/"] else ""
-        out.append(f"{path}: usd {kind}: {err.GetIdentifier()}{where}: "
-                   f"{_one_line(err.GetMessage())}")
-    return out
+    kind = kinds.get(err.GetType())
+    if kind is None:
+        return None
+    sites = []
+    for site in err.GetSites():
+        if site.IsProperty():
+            sites.append(str(site.GetProperty().GetPath()))
+        elif site.IsPrim():
+            sites.append(str(site.GetPrim().GetPath()))
+    where = f" at {', '.join(sites)}" if sites and sites != ["/"] else ""
+    return f"{path}: usd {kind}: {err.GetIdentifier()}{where}: {_one_line(err.GetMessage())}"
 
 
 def _ours(layer) -> bool:

@@ -1,6 +1,7 @@
 """The simbake command line.
 
     simbake bake SCENE.toml [-o OUT.usdc] [--quiet]   progress on stderr, summary at the end
+    simbake bake SCENE [--frames START:END]           bake that range in place of the scene's own
     simbake bake SHOT.usda [-o CACHE.usdc] [--shot OUT.usda]   a USD shot: a cache layer of overs
     simbake demo [-o OUT.usdc] [--quiet]              bakes the shipped default scene
     simbake check OUT.usdc                            validates a cache
@@ -67,10 +68,11 @@ def _print_scene_warnings(scene) -> None:
 
 def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
           shot: str | None = None, instancing: str = "auto", clips: int | None = None,
-          threads: int = 0) -> int:
+          threads: int = 0, frames: str | None = None) -> int:
     from .scene import load_scene
 
-    scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
+    start, end = parse_frames(scene_path, frames) if frames is not None else (None, None)
+    scene = load_scene(scene_path, start_frame=start, end_frame=end)  # before the core loads
     _print_scene_warnings(scene)
     from .simulate import bake
 
@@ -95,10 +97,24 @@ def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = Fals
     return 0
 
 
-def _check(path: str) -> int:
+def parse_frames(scene_path: str, text: str) -> tuple[int, int]:
+    """--frames START:END (inclusive, whole frame numbers, START <= END)."""
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        start, end = int(parts[0]), int(parts[1])
+    except ValueError:
+        raise SceneError(scene_path, "--frames", f"must be START:END, two whole frame numbers, got {text!r}") from None
+    if end < start:
+        raise SceneError(scene_path, "--frames", f"END must be >= START, got {text!r}")
+    return start, end
+
+
+def _check(path: str, strict: bool = False) -> int:
     from .check import check_cache
 
-    problems = check_cache(path)
+    problems = check_cache(path, strict=strict)
     for problem in problems:
         print(problem)
     if problems:
@@ -177,6 +193,9 @@ def parser() -> argparse.ArgumentParser:
                    help="write frames into value-clip layers of N frames each in OUT.clips/, stitched by OUT")
     b.add_argument("--threads", type=int, default=0, metavar="N",
                    help="worker threads of the solver (default 0: every CPU); the cache is the same at any count")
+    b.add_argument("--frames", metavar="START:END",
+                   help="bake these frames (inclusive), in place of the scene's or stage's own range; "
+                        "the initial state is written at START")
     b.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     b.add_argument("--preview", action="store_true",
                    help="also write CACHE.mp4 (simbake preview) and CACHE.report.html (simbake report)")
@@ -185,6 +204,8 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     c = sub.add_parser("check", help="validate a USD cache")
     c.add_argument("cache")
+    c.add_argument("--strict", action="store_true",
+                   help="a USD shot's cache: also every finding of OpenUSD's validators on the input")
     pv = sub.add_parser("preview", help="render a cache headless: a contact sheet (.png) or a movie (.mp4, .gif)")
     pv.add_argument("cache")
     pv.add_argument("-o", "--output", help="OUT.png (contact sheet), OUT.mp4 or OUT.gif (movie); default CACHE.mp4")
@@ -217,11 +238,11 @@ def _main(argv: list[str] | None) -> int:
     try:
         if args.command == "bake":
             return _bake(args.scene, args.output, args.quiet, args.preview, args.shot, args.instancing, args.clips,
-                         args.threads)
+                         args.threads, args.frames)
         if args.command == "demo":
             return _bake(str(demo_scene()), args.output, args.quiet)
         if args.command == "check":
-            return _check(args.cache)
+            return _check(args.cache, args.strict)
         if args.command == "report":
             return _report(args.cache, args.output)
         if args.command == "preview":

@@ -102,7 +102,7 @@ def check_scene(scene) -> None:
     _vector(scene, "scene.gravity", scene.gravity, ACCELERATION, "m/s^2")
     if scene.frame_count > MAX_FRAMES:
         raise _error(scene, "scene.end_frame", f"{scene.frame_count} frames is more than the budget of "
-                                               f"{MAX_FRAMES:,} frames in one bake; bake it in parts")
+                                               f"{MAX_FRAMES:,} frames in one bake; bake a part with --frames START:END")
     if scene.ground is not None:
         _range(scene, "ground.height", scene.ground.height, None, LENGTH, "m")
         _range(scene, "ground.friction", scene.ground.friction, None, FRICTION)

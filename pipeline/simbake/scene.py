@@ -80,6 +80,9 @@ class Shape:
     mesh_vertices: Any = field(default=None, compare=False, repr=False)
     mesh_triangles: Any = field(default=None, compare=False, repr=False)
     mesh_source: str = ""
+    # an open or non-manifold mesh of a kinematic or static collider: a two-sided surface of
+    # this half-thickness (m), phi = |d| - thickness; 0 for a closed mesh (a solid)
+    thickness: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -243,15 +246,62 @@ TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KE
 USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
 
 
-def load_scene(path: str | os.PathLike[str]) -> Scene:
+def load_scene(path: str | os.PathLike[str], *, start_frame: int | None = None,
+               end_frame: int | None = None) -> Scene:
     """Read and validate a scene file (TOML, or a USD shot: .usd, .usda, .usdc); raise
-    :class:`SceneError` on any problem."""
+    :class:`SceneError` on any problem. `start_frame`/`end_frame` (``--frames``) override the
+    file's own range; a USD stage without startTimeCode/endTimeCode needs both."""
     file = os.fspath(path)  # named in messages exactly as the user gave it
+    frames = frame_range(file, start_frame, end_frame)
     if Path(file).suffix.lower() in USD_SCENE_SUFFIXES:
         from .usd_scene import load_shot  # pxr is loaded only for USD shots
 
-        return load_shot(path)
-    return scene_from_data(read_scene_data(file), file)
+        if frames is not None and None in frames:  # one end given: the other is the stage's
+            frames = _stage_range(load_shot(path, None), frames)
+        return load_shot(path, frames)
+    return with_frames(scene_from_data(read_scene_data(file), file), start_frame, end_frame)
+
+
+def frame_range(file: str, start_frame, end_frame) -> tuple | None:
+    """(start, end) as given (either may be None), checked as whole numbers; None when neither."""
+    if start_frame is None and end_frame is None:
+        return None
+    for value in (start_frame, end_frame):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise _error(file, "--frames", f"frames must be whole numbers, got {value!r}")
+    if start_frame is not None and end_frame is not None and end_frame < start_frame:
+        raise _error(file, "--frames", f"END must be >= START, got {start_frame}:{end_frame}")
+    return (start_frame, end_frame)
+
+
+def _stage_range(scene: Scene, frames: tuple) -> tuple[int, int]:
+    start = scene.start_frame if frames[0] is None else frames[0]
+    end = scene.end_frame if frames[1] is None else frames[1]
+    if end < start:
+        raise _error(scene.source, "--frames", f"END must be >= START, got {start}:{end}")
+    return (start, end)
+
+
+def with_frames(scene: Scene, start_frame: int | None = None, end_frame: int | None = None) -> Scene:
+    """The scene baked over another range (``--frames``): the initial state is written at the
+    new start. A USD shot is read again at that range (its kinematic animation and initial
+    poses are the stage's at those time codes); a TOML scene's keys stay seconds after the
+    (new) start frame."""
+    frames = frame_range(scene.source or str(scene.path), start_frame, end_frame)
+    if frames is None:
+        return scene
+    frames = _stage_range(scene, frames)
+    if frames == (scene.start_frame, scene.end_frame):
+        return scene
+    if scene.shot is not None:
+        from .usd_scene import load_shot
+
+        return load_shot(scene.source or scene.shot.path, frames)
+    from dataclasses import replace
+
+    ranged = replace(scene, start_frame=frames[0], end_frame=frames[1])
+    check_scene(ranged)
+    return ranged
 
 
 def _scene_path(file: str) -> Path:

@@ -23,7 +23,7 @@ from .limits import check_budget, check_memory_in_flight, check_scene, crowding
 from .normals import corner_normals
 from .qa import QualityRecorder, qa_path
 from .qa_motion import MotionFigures, bounding_radius, lumped_masses, mean_edge
-from .scene import Scene
+from .scene import Scene, with_frames
 from .usd_instancer import quaternion_rate
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
 
@@ -229,7 +229,8 @@ def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Output
     for index, body, asset in wanted:
         name = written.get(id(asset.level_set))
         if name is None:
-            cached = level_set_cache_path(asset.vertices, asset.triangles, asset.voxel_size)
+            shell = max(body.shape.thickness, asset.voxel_size) if body.shape.thickness > 0 else 0.0
+            cached = level_set_cache_path(asset.vertices, asset.triangles, asset.voxel_size, thickness=shell)
             stem = body.shape.mesh_path.stem if body.shape.mesh_path is not None else body.name
             name = f"{stem}.{cached.stem[:12]}.vdb"
             if cached.is_file():
@@ -345,8 +346,12 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
 def bake(scene: Scene, output: str | Path, *,
          on_frame: Callable[[int, int], None] | None = None, qa: bool = True,
          shot: str | Path | None = None, instancing: str = "auto", clips: int | None = None,
-         threads: int = 0) -> BakeStats:
+         threads: int = 0, start_frame: int | None = None, end_frame: int | None = None) -> BakeStats:
     """Simulate the scene and stream its USD cache to `output` (appears only when complete).
+
+    `start_frame`/`end_frame` (``--frames``) bake another range than the scene's own: the
+    initial state is written at the new start (a USD shot is read again at that range, see
+    simbake.scene.with_frames).
 
     on_frame(done, total) is called after each written frame (for progress bars). With `qa`
     (the default) every written frame's quality figures are measured (simbake.qa) and written
@@ -360,6 +365,7 @@ def bake(scene: Scene, output: str | Path, *,
     CPU); the cache is the same bits at any count.
     """
     output = Path(output)
+    scene = with_frames(scene, start_frame, end_frame)
     check_scene(scene)  # a Scene made in Python (or from USD) meets the same range as a file's
     instancer_groups(scene, instancing)  # a bad mode is an error before any work
     if clips is not None:

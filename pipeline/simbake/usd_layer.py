@@ -145,8 +145,16 @@ class ShotLayerWriter(StreamingWriter):
         # prims this layer writes (value clips go on their root prims)
         self.sampled_prims = [b.prim_path for b in shot.bodies] + [c.prim_path for c in shot.cloths]
         self._bodies = []  # (body index, translate path, orient path, Vec3 type, Quat type)
-        for b in shot.bodies:
+        self._matrix_bodies = []  # (row, transform path, A (3x3)): ShotBody.shape_matrix
+        for row, b in enumerate(shot.bodies):
             spec = Sdf.CreatePrimInLayer(layer, b.prim_path)  # `over`, ancestors too
+            if b.shape_matrix is not None:  # its world transform whole, after !resetXformStack!
+                op = Sdf.AttributeSpec(spec, "xformOp:transform", _TN.Matrix4d)
+                Sdf.AttributeSpec(spec, "xformOpOrder", _TN.TokenArray, variability=Sdf.VariabilityUniform
+                                  ).default = Vt.TokenArray(["!resetXformStack!", "xformOp:transform"])
+                self._matrix_bodies.append((row, op.path, np.array(b.shape_matrix, dtype=np.float64)))
+                self._bodies.append(None)
+                continue
             t_name, t_type = _VEC3.get(b.op_types.get(_TRANSLATE, "double3"), _VEC3["double3"])
             q_name, q_type = _QUAT.get(b.op_types.get(_ORIENT, "quatf"), _QUAT["quatf"])
             Sdf.AttributeSpec(spec, _TRANSLATE, t_name)
@@ -315,10 +323,23 @@ class ShotLayerWriter(StreamingWriter):
 
         time = float(frame)
         with Sdf.ChangeBlock():
-            for (_, t_path, q_path, t_type, q_type), t, q in zip(self._bodies, t_local, q_local):
+            for body, t, q in zip(self._bodies, t_local, q_local):
+                if body is None:  # written whole below
+                    continue
+                _, t_path, q_path, t_type, q_type = body
                 layer.SetTimeSample(t_path, time, t_type(*t))
                 layer.SetTimeSample(q_path, time, q_type(float(q[0]), float(q[1]), float(q[2]), float(q[3])))
+            whole = {}
+            for row, op_path, a in self._matrix_bodies:  # [R(t) A, t(t)], row vectors for Gf
+                m = np.eye(4)
+                m[:3, :3] = np.array(Gf.Matrix3d(Gf.Rotation(Gf.Quatd(*q_local[row])))).T @ a
+                m[:3, 3] = t_local[row]
+                whole[row] = m
+                layer.SetTimeSample(op_path, time, Gf.Matrix4d(m.T.tolist()))
             for row, op_path, local in self._volume_tracks:  # Volumes beside Gprim bodies
+                if row in whole:
+                    layer.SetTimeSample(op_path, time, Gf.Matrix4d((whole[row] @ local).T.tolist()))
+                    continue
                 m = np.eye(4)
                 m[:3, :3] = np.array(Gf.Matrix3d(Gf.Rotation(Gf.Quatd(*q_local[row])))).T
                 if shot.bodies[row].scale is not None:

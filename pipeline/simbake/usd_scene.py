@@ -68,6 +68,11 @@ class ShotBody:
     # an animated parent: its (rotation (w, x, y, z), translation, uniform scale) at every
     # time code from the start, in place of the parent_* fields
     parent_track: tuple = ()
+    # under a parent with non-uniform scale or shear (or a sheared or mirrored body): the
+    # body's world transform is written whole, a time-sampled xformOp:transform after
+    # !resetXformStack!, as [R(t) A, t(t)] with A (3x3, stage units, rows) the start's world
+    # transform in the body frame (the scale, shear and mirror the collision shape holds)
+    shape_matrix: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -157,6 +162,17 @@ def _quat_matrix(q) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
+def _polar(m3: np.ndarray):
+    """m3 = R A with R the proper rotation nearest to m3 (SVD polar decomposition; a mirror
+    is left in A) and A = R^T m3 (scale, shear, mirror), or None for a singular m3."""
+    u, s, vt = np.linalg.svd(m3)
+    if not s.min() > _TOL * s.max():
+        return None
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ d @ vt
+    return r, r.T @ m3
+
+
 def _rotation_and_scale(m3: np.ndarray):
     """m3 = R diag(k) with R a proper rotation, or None (shear, a mirror, a zero scale)."""
     k = np.linalg.norm(m3, axis=0)
@@ -193,8 +209,10 @@ def _show(values) -> str:
 # Loading
 # --------------------------------------------------------------------------------------------
 
-def load_shot(path: str | os.PathLike[str]) -> Scene:
-    """Read a USD stage as a Scene; raise :class:`SceneError` (one line) on any problem:
+def load_shot(path: str | os.PathLike[str], frames: tuple[int, int] | None = None) -> Scene:
+    """Read a USD stage as a Scene; `frames` (START, END), when given, is the range to bake
+    in place of the stage's own startTimeCode/endTimeCode (``--frames``; a stage with no range
+    needs it). Raise :class:`SceneError` (one line) on any problem:
     a syntax error (at its line and column, in whichever layer), a composition error (a
     missing or cyclic sublayer, a reference or payload that does not resolve), bad values.
     OpenUSD's own warnings become the scene's warnings; nothing of OpenUSD's reaches stderr."""
@@ -218,7 +236,7 @@ def load_shot(path: str | os.PathLike[str]) -> Scene:
     if composition or opened.errors:
         raise _usd_error(file, stage_path, opened.errors + composition, "composition error")
     with trapped() as parsing:
-        reader = _Reader(file, stage_path, stage)
+        reader = _Reader(file, stage_path, stage, frames)
         scene = reader.scene()
     if parsing.errors:
         raise _usd_error(file, stage_path, parsing.errors, "OpenUSD reported an error")
@@ -241,7 +259,7 @@ def _usd_error(file: str, stage_path: Path, texts: list[str], what: str) -> Scen
 class _Reader:
     """One stage read into a Scene; errors name the file, the prim path and the attribute."""
 
-    def __init__(self, file: str, path: Path, stage):
+    def __init__(self, file: str, path: Path, stage, frames: tuple[int, int] | None = None):
         from pxr import UsdGeom, UsdPhysics
 
         self.file, self.path, self.stage = file, path, stage
@@ -249,6 +267,7 @@ class _Reader:
         self.keys: list[tuple[str, str]] = []    # scene key -> "PRIM.attribute" (ShotInfo.keys)
         self.instances: set[str] = set()          # instanceable prims above simulated ones
         self._warned: set[str] = set()
+        self._named: dict[str, list] = {}        # warn_once: name -> [first prim, problem, prims]
         axis = UsdGeom.GetStageUpAxis(stage)
         if axis not in ("Y", "Z"):
             raise self.error("", "upAxis", f"must be Y or Z, got {axis!r}")
@@ -260,18 +279,24 @@ class _Reader:
                 raise self.error("", name, f"must be a finite number > 0, got {value}")
         self.C = _Z_UP if axis == "Z" else np.eye(3)
         self.qC = (_SQRT_HALF, -_SQRT_HALF, 0.0, 0.0) if axis == "Z" else (1.0, 0.0, 0.0, 0.0)
-        if not stage.HasAuthoredTimeCodeRange():
-            raise self.error("", "startTimeCode", "the stage needs startTimeCode and endTimeCode "
-                                                  "(one frame per integer time code)")
-        self.start, self.end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
-        for name, value in (("startTimeCode", self.start), ("endTimeCode", self.end)):
+        self.frames_given = frames is not None
+        if frames is not None:  # --frames START:END overrides the stage's own range
+            self.start, self.end = float(frames[0]), float(frames[1])
+            start_name = end_name = "--frames"
+        elif not stage.HasAuthoredTimeCodeRange():
+            raise self.error("", "startTimeCode", "the stage has no startTimeCode and endTimeCode; give the "
+                                                  "frames to bake with --frames START:END")
+        else:
+            self.start, self.end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+            start_name, end_name = "startTimeCode", "endTimeCode"
+        for name, value in ((start_name, self.start), (end_name, self.end)):
             if not (math.isfinite(value) and value == int(value)):
                 raise self.error("", name, f"must be an integer time code, got {value}")
         if self.end < self.start:
-            raise self.error("", "endTimeCode", f"must be >= startTimeCode ({self.start:g}), got {self.end:g}")
+            raise self.error("", end_name, f"the end must be >= the start ({self.start:g}), got {self.end:g}")
         if self.end - self.start + 1 > MAX_FRAMES:  # before any animation is sampled
-            raise self.error("", "endTimeCode", f"{self.end - self.start + 1:.0f} frames is more than the budget of "
-                                                f"{MAX_FRAMES:,} frames in one bake; bake it in parts")
+            raise self.error("", end_name, f"{self.end - self.start + 1:.0f} frames is more than the budget of "
+                                           f"{MAX_FRAMES:,} frames in one bake; bake a part with --frames START:END")
         self.tcps = float(stage.GetTimeCodesPerSecond())
         if not (math.isfinite(self.tcps) and self.tcps > 0):
             raise self.error("", "timeCodesPerSecond", f"must be > 0, got {self.tcps}")
@@ -290,6 +315,23 @@ class _Reader:
             self._warned.add(key)
             self.warnings.append(f"{self.file}: {prim_path}: {problem}")
 
+    def warn_once(self, name: str, prim_path, problem: str) -> None:
+        """Once per attribute or schema `name` however many prims author it: the first prim is
+        named and the others counted (an opinion on 500 props is one line, not 500)."""
+        entry = self._named.get(name)
+        if entry is None:
+            self._named[name] = [str(prim_path), problem, {str(prim_path)}]
+            self.warnings.append(name)  # a placeholder, written out by _named_warnings
+        else:
+            entry[2].add(str(prim_path))
+
+    def _named_warnings(self) -> None:
+        for i, line in enumerate(self.warnings):
+            if line in self._named:
+                first, problem, prims = self._named[line]
+                more = f" (and {len(prims) - 1} more prim{'s' if len(prims) > 2 else ''})" if len(prims) > 1 else ""
+                self.warnings[i] = f"{self.file}: {first}: {problem}{more}"
+
     # -- conversions --------------------------------------------------------------------------
 
     def point(self, p) -> tuple[float, float, float]:
@@ -305,10 +347,15 @@ class _Reader:
             return _matrix(self.xforms.GetLocalToWorldTransform(prim))
         return _matrix(UsdGeom.XformCache(time).GetLocalToWorldTransform(prim))
 
-    def frame(self, prim, what: str, time=None):
-        """(R, t, k): the prim's world rotation, translation and scale along its own axes."""
+    def frame(self, prim, what: str, time=None, general: bool = False):
+        """(R, t, k): the prim's world rotation, translation and scale along its own axes.
+        `general`: a shear or a mirror is accepted (static colliders, dynamic bodies under a
+        non-uniform parent): R is then the nearest rotation, the rest goes into the shape."""
         m = self.world(prim, time)
         parts = _rotation_and_scale(m[:3, :3])
+        if parts is None and general and _polar(m[:3, :3]) is not None:
+            r, a = _polar(m[:3, :3])
+            return r, m[:3, 3], np.linalg.norm(a, axis=0)
         if parts is None:
             raise self.error(prim.GetPath(), "xformOpOrder",
                              f"the {what}'s world transform has a shear, a mirror or a zero scale; "
@@ -345,13 +392,16 @@ class _Reader:
                 shapes[str(p)] = d
         for kind, entries in descs.items():
             if kind not in _SUPPORTED:
-                for p, _ in entries:
-                    self.warn(p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
-        for p, d in shapes.items():
+                for p, _ in sorted(entries, key=lambda e: str(e[0])):
+                    self.warn_once(str(kind), p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
+        for p, d in sorted(shapes.items()):
             if d.collisionGroups:
-                self.warn(p, "collision groups are not simulated by simbake; the collider collides with everything")
+                self.warn_once("PhysicsCollisionGroup", p, "collision groups are not simulated by simbake; "
+                                                           "the collider collides with everything")
             if d.filteredCollisions:
-                self.warn(p, "filtered collision pairs are not simulated by simbake; left out")
+                self.warn_once("physics:filteredPairs", p, "filtered collision pairs are not simulated by "
+                                                           "simbake; the pair collides")
+        self.substeps = self._physx()
 
         gravity = self._gravity(descs.get(T.Scene, []))
         self.dynamic_paths = {str(p) for p, d in descs.get(T.RigidBody, [])
@@ -383,8 +433,10 @@ class _Reader:
                 bodies.append(self._static_body(p, d, used_names, len(bodies)))
 
         cloths, shot_cloths = self._cloths(used_names)
-        self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", "startTimeCode"),
-                      ("scene.end_frame", "endTimeCode"), ("solver.substeps", "endTimeCode")]
+        self._named_warnings()
+        ranged = ("--frames", "--frames") if self.frames_given else ("startTimeCode", "endTimeCode")
+        self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", ranged[0]),
+                      ("scene.end_frame", ranged[1]), ("solver.substeps", ranged[1])]
         fps_meta = self.stage.GetFramesPerSecond() if self.stage.GetRootLayer().HasFramesPerSecond() else None
         info = ShotInfo(
             path=self.path,
@@ -396,7 +448,8 @@ class _Reader:
             default_prim=self.stage.GetRootLayer().defaultPrim,
             bodies=tuple(shot_bodies), cloths=tuple(shot_cloths), dependencies=self._dependencies(),
             instances=tuple(sorted(self.instances)), keys=tuple(self.keys))
-        return Scene(path=self.path, source=self.file, fps=self.tcps, start_frame=int(self.start),
+        return Scene(path=self.path, source=self.file, fps=self.tcps, substeps=self.substeps,
+                     start_frame=int(self.start),
                      end_frame=int(self.end), gravity=gravity, ground=ground, bodies=tuple(bodies),
                      cloths=tuple(cloths), warnings=tuple(self.warnings), shot=info)
 
@@ -450,7 +503,7 @@ class _Reader:
         """(friction, restitution, density in kg/m^3 or None) of a collider's physics material;
         its prim is left in `material_path` (the collider's when it has none)."""
         self.material_path = str(shape_path)
-        for m in shape.materials:
+        for m in list(shape.materials) or self._binding_without_api(shape_path):
             d = self.materials.get(str(m))
             if d is None:
                 continue
@@ -460,15 +513,83 @@ class _Reader:
             if not (math.isfinite(restitution) and 0 <= restitution <= 1):
                 raise self.error(m, "physics:restitution", f"must be in [0, 1], got {restitution}")
             if _decimal(d.staticFriction) != friction:
-                self.warn(m, f"physics:staticFriction ({float(d.staticFriction):g}) differs from "
-                             f"physics:dynamicFriction ({friction:g}); simbake uses one Coulomb "
-                             "coefficient, the dynamic one")
+                self.warn_once("physics:staticFriction", m,
+                               f"physics:staticFriction ({float(d.staticFriction):g}) differs from "
+                               f"physics:dynamicFriction ({friction:g}); simbake uses one Coulomb "
+                               "coefficient, the dynamic one")
             density = _decimal(d.density)
             if not (math.isfinite(density) and density >= 0):
                 raise self.error(m, "physics:density", f"must be a finite number >= 0 (0: unset), got {density}")
             self.material_path = str(m)
             return friction, restitution, density * self.kpu / self.mpu ** 3 if density > 0 else None
         return Body.friction, Body.restitution, None
+
+    def _binding_without_api(self, shape_path) -> list[str]:
+        """A `material:binding:physics` (else `material:binding`) relationship on the collider
+        or an ancestor that has no MaterialBindingAPI applied: OpenUSD's parser ignores it, but
+        it is the binding the author meant (OpenUSD's own usdPhysicsSpheresWithMaterial.usda is
+        written so). Read, with one warning naming the missing API. The nearest prim wins, its
+        physics-purpose binding before its all-purpose one, as UsdShade resolves them; a target
+        without PhysicsMaterialAPI (a render material) is no physics material."""
+        from pxr import UsdShade, UsdPhysics
+
+        prim = self.stage.GetPrimAtPath(shape_path)
+        while prim and not prim.IsPseudoRoot():
+            if not prim.HasAPI(UsdShade.MaterialBindingAPI):
+                for name in ("material:binding:physics", "material:binding"):
+                    rel = prim.GetRelationship(name)
+                    targets = [str(t) for t in rel.GetTargets()] if rel else []
+                    target = self.stage.GetPrimAtPath(targets[0]) if targets else None
+                    if target and target.HasAPI(UsdPhysics.MaterialAPI):
+                        self.warn_once("MaterialBindingAPI", prim.GetPath(),
+                                       f"{name} without MaterialBindingAPI applied (OpenUSD's parser ignores it); "
+                                       "read as the author meant: apply MaterialBindingAPI for other tools")
+                        if targets[0] not in self.materials:
+                            self.materials[targets[0]] = _MaterialDesc(UsdPhysics.MaterialAPI(target))
+                        return [targets[0]]
+            prim = prim.GetParent()
+        return []
+
+    def _physx(self) -> int:
+        """PhysX's own attributes (Omniverse Kit writes them: PhysxSchema is not in usd-core):
+        those that map onto simbake settings are read, those whose value is what simbake does
+        anyway pass, the rest are warned about once per attribute name (see _PHYSX_MAPPED and
+        _PHYSX_NEUTRAL). Returns the solver's substeps per frame (0: automatic)."""
+        substeps = 0
+        for prim in self.stage.Traverse():
+            listop = prim.GetMetadata("apiSchemas")  # unregistered schemas too (PhysxSchema)
+            for schema in (listop.ApplyOperations([]) if listop else []):
+                if schema.startswith("Physx") and schema.split(":")[0] in _PHYSX_BEHAVIOUR:
+                    self.warn_once(schema, prim.GetPath(), f"{schema} {_PHYSX_BEHAVIOUR[schema.split(':')[0]]}")
+            for attr in prim.GetAuthoredAttributes():
+                name = attr.GetName()
+                if not name.startswith("physx") or not attr.HasAuthoredValue():
+                    continue
+                value = attr.Get(self.start)
+                if name in _PHYSX_MAPPED:
+                    if name == "physxScene:timeStepsPerSecond":
+                        substeps = self._physx_steps(prim, value)
+                    continue  # read where the shape or body is read
+                if name in _PHYSX_NEUTRAL and _same(value, _PHYSX_NEUTRAL[name]):
+                    continue
+                self.warn_once(name, prim.GetPath(), f"{name} = {_short(_value_text(value), 40)} is a PhysX "
+                                                     "setting simbake does not read; ignored")
+        return substeps
+
+    def _physx_steps(self, prim, value) -> int:
+        """physxScene:timeStepsPerSecond -> substeps per frame (the nearest whole number)."""
+        try:
+            steps_per_second = float(value)
+        except (TypeError, ValueError):
+            raise self.error(prim.GetPath(), "physxScene:timeStepsPerSecond", f"must be a number, got {value!r}") from None
+        if not (math.isfinite(steps_per_second) and steps_per_second > 0):
+            raise self.error(prim.GetPath(), "physxScene:timeStepsPerSecond", f"must be > 0, got {value}")
+        substeps = max(1, round(steps_per_second / self.tcps))
+        if abs(substeps * self.tcps - steps_per_second) > 1e-9 * steps_per_second:
+            self.warn_once("physxScene:timeStepsPerSecond", prim.GetPath(),
+                           f"physxScene:timeStepsPerSecond = {steps_per_second:g} is not a whole number of steps "
+                           f"per frame at {self.tcps:g} fps; simbake takes {substeps} per frame")
+        return substeps
 
     # -- shapes -------------------------------------------------------------------------------
 
@@ -480,7 +601,7 @@ class _Reader:
 
         path = prim.GetPath()
         a, t = to_body[:3, :3], to_body[:3, 3]
-        parts = _rotation_and_scale(a)
+        parts = _rotation_and_scale(a @ np.diag(np.sign(np.diag(a)) + (np.diag(a) == 0)))  # mirrors of a
         centred = np.abs(t).max() <= _TOL * max(1.0, np.abs(a).max())
         if prim.IsA(UsdGeom.Cube):
             size = self._positive(prim, "size", UsdGeom.Cube(prim).GetSizeAttr().Get())
@@ -489,7 +610,7 @@ class _Reader:
             from . import _core
 
             v, f = _core.box_mesh(np.full(3, size), 1)
-            return ("mesh", v @ a.T + t, np.asarray(f, dtype=np.int32))
+            return ("mesh", v @ a.T + t, _wound(np.asarray(f, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Sphere):
             radius = self._positive(prim, "radius", UsdGeom.Sphere(prim).GetRadiusAttr().Get())
             if centred and parts is not None and np.ptp(parts[1]) <= _TOL * parts[1].max():
@@ -498,7 +619,7 @@ class _Reader:
             from .assets import SPHERE_SUBDIVISIONS
 
             v, f = _core.sphere_mesh(radius, SPHERE_SUBDIVISIONS)
-            return ("mesh", v @ a.T + t, np.asarray(f, dtype=np.int32))
+            return ("mesh", v @ a.T + t, _wound(np.asarray(f, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Capsule) or prim.IsA(UsdGeom.Cylinder):
             import trimesh
 
@@ -512,12 +633,61 @@ class _Reader:
                 mesh = trimesh.creation.cylinder(radius=radius, height=height, sections=32)
             v = np.asarray(mesh.vertices, dtype=np.float64)  # along z, centred
             v = {"X": v[:, [2, 0, 1]], "Y": v[:, [1, 2, 0]], "Z": v}[axis]
-            return ("mesh", v @ a.T + t, np.asarray(mesh.faces, dtype=np.int32))
+            return ("mesh", v @ a.T + t, _wound(np.asarray(mesh.faces, dtype=np.int32), a))
         if prim.IsA(UsdGeom.Mesh):
-            v, f = self._mesh_triangles(prim)
-            return ("mesh", v @ a.T + t, f)
+            v, f = self._approximated(prim, *self._mesh_triangles(prim))
+            return ("mesh", v @ a.T + t, _wound(f, a))
         raise self.error(path, "", f"a collider of type {prim.GetTypeName() or 'none'} is not supported "
                                    "(Cube, Sphere, Capsule, Cylinder, Mesh, or a static Plane)")
+
+    def _approximated(self, prim, v: np.ndarray, f: np.ndarray):
+        """A mesh collider's physics:approximation (PhysicsMeshCollisionAPI), in its local
+        space, as PhysX reads it (APPROXIMATIONS says what each becomes)."""
+        from pxr import UsdPhysics
+
+        attr = UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr()
+        token = str(attr.Get()) if attr and attr.HasAuthoredValue() else "none"
+        if token not in APPROXIMATIONS:
+            self.warn_once(f"physics:approximation={token}", prim.GetPath(),
+                           f"physics:approximation {token!r} is not one simbake knows "
+                           f"({', '.join(APPROXIMATIONS)}); the mesh is used as it is")
+            return v, f
+        import trimesh
+
+        if token == "convexHull":
+            try:
+                hull = trimesh.Trimesh(v, f, process=False).convex_hull
+            except Exception:  # flat: no volume to hull (qhull refuses); the surface is its own hull
+                return v, f
+            return np.asarray(hull.vertices, dtype=np.float64), np.asarray(hull.faces, dtype=np.int32)
+        if token == "boundingCube":
+            from . import _core
+
+            lo, hi = v.min(axis=0), v.max(axis=0)
+            box, faces = _core.box_mesh(np.maximum(hi - lo, 1e-12), 1)
+            return box + 0.5 * (lo + hi), np.asarray(faces, dtype=np.int32)
+        if token == "boundingSphere":
+            from . import _core
+            from .assets import SPHERE_SUBDIVISIONS
+
+            centre, radius = trimesh.nsphere.minimum_nsphere(v)
+            ball, faces = _core.sphere_mesh(float(radius), SPHERE_SUBDIVISIONS)
+            return ball + centre, np.asarray(faces, dtype=np.int32)
+        return v, f  # none, meshSimplification, convexDecomposition, sdf: the mesh itself
+
+    def _voxel_size(self, colliders, shape) -> float:
+        """PhysX's physxSDFMeshCollision:sdfResolution (voxels along the longest extent) as
+        the level set's voxel size (m); 0: automatic."""
+        for prim in colliders:
+            attr = prim.GetAttribute("physxSDFMeshCollision:sdfResolution")
+            if not (attr and attr.HasAuthoredValue()) or shape.mesh_vertices is None:
+                continue
+            value = attr.Get()
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                raise self.error(prim.GetPath(), "physxSDFMeshCollision:sdfResolution", f"must be a number > 0, got {value!r}")
+            v = np.asarray(shape.mesh_vertices)
+            return float((v.max(axis=0) - v.min(axis=0)).max()) / float(value)
+        return 0.0
 
     def _axis(self, prim, schema) -> str:
         """A Capsule's, Cylinder's or Plane's axis token: X, Y or Z."""
@@ -584,8 +754,10 @@ class _Reader:
         used.add(name)
         return name
 
-    def _shape(self, owner_path, colliders: list, body_r, body_t, what: str):
-        """The Shape (SI, body frame) of one or more collider prims of a body."""
+    def _shape(self, owner_path, colliders: list, body_r, body_t, what: str, two_sided: bool = False):
+        """The Shape (SI, body frame) of one or more collider prims of a body. `two_sided`
+        (static and kinematic colliders): an open or non-manifold mesh is a two-sided surface
+        with the collision thickness (physxCollision:restOffset, else SHELL_THICKNESS)."""
         pieces = []
         for prim in colliders:
             to_body = np.eye(4)
@@ -611,9 +783,35 @@ class _Reader:
             triangles.append(np.asarray(f, dtype=np.int32) + offset)
             offset += len(v)
         v, f = np.concatenate(vertices), np.concatenate(triangles)
-        self._check_closed(pieces, v, f)
+        thickness = 0.0
+        if not two_sided:
+            self._check_closed(pieces, v, f)
+        elif not self._closed(v, f):
+            thickness = self._thickness(pieces)
         return Shape(kind="mesh", mesh_vertices=_frozen(v), mesh_triangles=_frozen(f),
-                     mesh_source=str(owner_path))
+                     mesh_source=str(owner_path), thickness=thickness)
+
+    @staticmethod
+    def _closed(v, f) -> bool:
+        import trimesh
+
+        mesh = trimesh.Trimesh(v, f, process=True)
+        return bool(mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0)
+
+    def _thickness(self, pieces) -> float:
+        """An open collider's half-thickness (m): PhysX's physxCollision:restOffset (the
+        distance bodies come to rest at) when authored > 0, else SHELL_THICKNESS."""
+        from .assets import SHELL_THICKNESS
+
+        for prim, _ in pieces:
+            attr = prim.GetAttribute("physxCollision:restOffset")
+            if attr and attr.HasAuthoredValue():
+                value = attr.Get()
+                if not isinstance(value, (int, float)) or not math.isfinite(value):
+                    raise self.error(prim.GetPath(), "physxCollision:restOffset", f"must be a finite number, got {value!r}")
+                if value > 0:
+                    return float(value) * self.mpu
+        return SHELL_THICKNESS
 
     def _check_closed(self, pieces, v, f) -> None:
         import trimesh
@@ -635,7 +833,7 @@ class _Reader:
         from pxr import Usd, UsdGeom, UsdPhysics
 
         prim = self.stage.GetPrimAtPath(path)
-        r, t, k = self.frame(prim, "rigid body")
+        r, t, k = self.frame(prim, "rigid body", general=True)
         colliders = []
         for c in d.collisions:
             shape = shapes.get(str(c))
@@ -651,7 +849,7 @@ class _Reader:
         if not colliders:
             raise self.error(path, "", "a rigid body needs a collider (PhysicsCollisionAPI on a Cube, "
                                        "Sphere, Capsule, Cylinder or Mesh at or under it)")
-        shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body")
+        shape = self._shape(path, [c for c, _ in colliders], r, t, "rigid body", two_sided=bool(d.kinematicBody))
         friction, restitution, material_density = self._material(colliders[0][0].GetPath(), colliders[0][1])
         self._body_keys(index, path, colliders[0][0].GetPath(), self.material_path)
         for c, s in colliders[1:]:
@@ -665,11 +863,12 @@ class _Reader:
             if not np.isfinite(np.asarray(value, dtype=np.float64)).all():
                 raise self.error(path, name, "must be finite")
         if d.startsAsleep:
-            self.warn(path, "physics:startsAsleep is not supported; the body starts awake "
-                            "(and sleeps after 0.5 s at rest)")
+            self.warn_once("physics:startsAsleep", path, "physics:startsAsleep is not supported; the body "
+                                                         "starts awake (and sleeps after 0.5 s at rest)")
         keys = self._keys(prim) if kinematic else ()
         body = Body(
             name=self._name(path, used), shape=shape, density=density, mass=mass,
+            voxel_size=self._voxel_size([c for c, _ in colliders], shape),
             position=position, orientation=orientation,
             linear_velocity=self.direction(_decimals(d.linearVelocity), self.mpu),
             angular_velocity=self.direction(_decimals(d.angularVelocity), math.pi / 180.0),
@@ -706,6 +905,12 @@ class _Reader:
         animated = not reset and any(UsdGeom.Xformable(a) and UsdGeom.Xformable(a).TransformMightBeTimeVarying()
                                      for a in ancestors)
         m = self.world(parent) if ancestors and not reset else np.eye(4)
+        whole = self.world(prim)
+        if self._needs_matrix(m, whole):  # the body moves rigidly; its shape holds the rest
+            r, a = _polar(whole[:3, :3])
+            return ShotBody(index=index, prim_path=str(prim.GetPath()), parent_rotation=(1.0, 0.0, 0.0, 0.0),
+                            parent_translation=(0.0, 0.0, 0.0), parent_scale=1.0, scale=None,
+                            reset_xform_stack=True, shape_matrix=tuple(_vec(row) for row in a))
         q, t, sigma = self._similarity(parent, m)
         track = ()
         if animated:
@@ -727,6 +932,13 @@ class _Reader:
                         scale=None if np.abs(scale - 1).max() <= _TOL else _vec(scale),
                         op_types={n: ops[n] for n in ("xformOp:translate", "xformOp:orient", "xformOp:scale")
                                   if n in ops})
+
+    @staticmethod
+    def _needs_matrix(parent: np.ndarray, whole: np.ndarray) -> bool:
+        """A parent that is not a similarity, or a body whose world transform is not a rotation
+        times a scale along its own axes: translate/orient/scale cannot say where it goes."""
+        parts = _rotation_and_scale(parent[:3, :3])
+        return parts is None or np.ptp(parts[1]) > _TOL * parts[1].max() or _rotation_and_scale(whole[:3, :3]) is None
 
     def _similarity(self, parent, m: np.ndarray):
         """(rotation quaternion, translation, uniform scale) of a parent's world transform."""
@@ -839,12 +1051,13 @@ class _Reader:
 
     def _static_body(self, path, d, used: set[str], index: int) -> Body:
         prim = self.stage.GetPrimAtPath(path)
-        r, t, _ = self.frame(prim, "static collider")
-        shape = self._shape(path, [prim], r, t, "static collider")
+        r, t, _ = self.frame(prim, "static collider", general=True)
+        shape = self._shape(path, [prim], r, t, "static collider", two_sided=True)
         friction, restitution, _ = self._material(path, d)
         self._body_keys(index, path, path, self.material_path)
         position, orientation = self.pose(r, t)
         return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
+                    voxel_size=self._voxel_size([prim], shape),
                     position=position, orientation=orientation, linear_velocity=(0.0, 0.0, 0.0),
                     angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
                     kinematic=True, prim_path=str(path))
@@ -913,6 +1126,20 @@ class _Reader:
             cloths.append(cloth)
         return cloths, targets
 
+
+# physics:approximation of a mesh collider (UsdPhysics.MeshCollisionAPI), as simbake reads it:
+APPROXIMATIONS = {
+    "none": "the mesh itself (a closed mesh is a solid; an open static one a two-sided surface)",
+    "meshSimplification": "the mesh itself: simbake does not simplify (its level set is already "
+                          "a resolution-bound approximation)",
+    "convexHull": "the convex hull of the mesh's points (trimesh)",
+    "convexDecomposition": "the mesh itself: simbake's level sets take concave shapes whole, which "
+                           "is what an exact decomposition would give",
+    "boundingSphere": "the smallest sphere around the mesh's points (trimesh's minimum_nsphere)",
+    "boundingCube": "the box around the mesh's points along the mesh's own axes",
+    "sdf": "the mesh's signed distance field, simbake's own representation; "
+           "physxSDFMeshCollision:sdfResolution sets its voxels across the longest extent",
+}
 
 _CLOTH_KEYS = ("area_density", "stretch_stiffness", "bend_stiffness", "damping", "strain_limit",
                "friction", "thickness", "poisson_ratio")
@@ -989,6 +1216,58 @@ class _ClothAttributes:
 # helpers
 # --------------------------------------------------------------------------------------------
 
+class _MaterialDesc:
+    """A physics material read from its prim (the parser's RigidBodyMaterialDesc fields),
+    for a material bound without MaterialBindingAPI (the parser skips those)."""
+
+    def __init__(self, api):
+        self.dynamicFriction = api.GetDynamicFrictionAttr().Get() or 0.0
+        self.staticFriction = api.GetStaticFrictionAttr().Get() or 0.0
+        self.restitution = api.GetRestitutionAttr().Get() or 0.0
+        self.density = api.GetDensityAttr().Get() or 0.0
+
+
+# PhysX attributes simbake reads: the solver's steps per second (substeps per frame), and the
+# collision thickness and SDF resolution of mesh colliders (see _Reader._collider_geometry)
+_PHYSX_MAPPED = ("physxScene:timeStepsPerSecond", "physxCollision:restOffset",
+                 "physxSDFMeshCollision:sdfResolution")
+# PhysX attributes whose value, when it is this, is what simbake does anyway: no warning
+_PHYSX_NEUTRAL = {
+    "physxRigidBody:linearDamping": 0.0, "physxRigidBody:angularDamping": 0.0,
+    "physxRigidBody:disableGravity": False, "physxRigidBody:enableCCD": True,
+    "physxRigidBody:enableSpeculativeCCD": True, "physxRigidBody:retainAccelerations": False,
+    "physxScene:enableCCD": True, "physxScene:enableGPUDynamics": False,
+    "physxCollision:contactOffset": None,  # a detection margin: simbake's contacts are speculative
+    "physxMaterial:frictionCombineMode": "average", "physxMaterial:restitutionCombineMode": "average",
+}
+# PhysX schemas that change what happens by being applied
+_PHYSX_BEHAVIOUR = {
+    "PhysxTriggerAPI": "(a trigger volume) is not simulated by simbake: the collider collides",
+    "PhysxCharacterControllerAPI": "is not simulated by simbake; the prim is a plain collider",
+    "PhysxDeformableBodyAPI": "is not simulated by simbake; left out",
+    "PhysxDeformableSurfaceAPI": "is not simulated by simbake (use SimbakeClothAPI); left out",
+    "PhysxParticleSystem": "is not simulated by simbake; left out",
+    "PhysxVehicleAPI": "is not simulated by simbake; the prim is a plain rigid body",
+}
+
+
+def _same(value, neutral) -> bool:
+    if neutral is None:
+        return True
+    if isinstance(neutral, str):
+        return str(value) == neutral
+    try:
+        return bool(value == neutral) if isinstance(neutral, bool) else float(value) == float(neutral)
+    except (TypeError, ValueError):
+        return False
+
+
+def _value_text(value) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
 _SUPPORTED_NAMES = ("Scene", "RigidBody", "RigidBodyMaterial", "CubeShape", "SphereShape",
                     "CapsuleShape", "CylinderShape", "MeshShape", "PlaneShape", "Capsule1Shape",
                     "Cylinder1Shape")
@@ -1009,6 +1288,11 @@ def _describe_kind(kind) -> str:
     return {"Articulation": "an articulation", "CollisionGroup": "a collision group",
             "ConeShape": "a cone collider", "CustomShape": "a custom collider",
             "SpherePointsShape": "a sphere-points collider"}.get(name, name)
+
+
+def _wound(faces: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Triangles wound outwards after the linear map `a` (a mirror turns them inside out)."""
+    return faces[:, ::-1].copy() if np.linalg.det(a) < 0 else faces
 
 
 def _has_cloth_api(prim) -> bool:

@@ -6,7 +6,9 @@ Layout of a cache::
         /<body>                 def Xform: xformOp:translate (double3), xformOp:orient (quatd),
                                 xformOpOrder; time-sampled every frame for a dynamic body,
                                 default values only for a static one
-            /mesh               def Mesh, static: points, faceVertexCounts, faceVertexIndices,
+            /<body>             def Mesh, static, named as its body (importers that merge an
+                                Xform with its single child, as Blender's does, keep the
+                                body's name): points, faceVertexCounts, faceVertexIndices,
                                 normals ("faceVarying", split at creases; or "vertex"),
                                 extent, subdivisionScheme "none"
         /<cloth>                def Mesh: topology once; points, normals, velocities and
@@ -341,6 +343,13 @@ class StreamingWriter:
             _remove(self._tmp)
 
 
+
+def body_mesh_name(name: str) -> str:
+    """The name of a body's Mesh child: the body's own (``/World/ball/ball``), so that an
+    importer that merges an Xform with its single child (Blender does) keeps the name; a body
+    called ``levelset`` would meet its level-set Volume, so its mesh is ``levelset_mesh``."""
+    return name if name != "levelset" else "levelset_mesh"
+
 class CacheWriter(StreamingWriter):
     """Streams a simbake USD cache (version 1) to ``path``; see the module docstring.
 
@@ -469,7 +478,7 @@ class CacheWriter(StreamingWriter):
                 self._attr(xf, "xformOpOrder", _TN.TokenArray, _OP_ORDER, uniform=True)
                 self._translate_paths.append(t.path)
                 self._orient_paths.append(o.path)
-                mesh = self._def(xf.path, "mesh", "Mesh")
+                mesh = self._def(xf.path, body_mesh_name(body.name), "Mesh")
                 self._mesh_topology(mesh, body.face_vertex_counts, body.face_vertex_indices)
                 self._attr(mesh, "points", _TN.Point3fArray, Vt.Vec3fArray.FromNumpy(body.points))
                 n = self._attr(mesh, "normals", _TN.Normal3fArray,

@@ -303,7 +303,7 @@ def render_ready_failures(scene, cache) -> tuple[dict, dict]:
     meshes = {}
     for b in bodies:
         if b.shape.kind == "mesh":
-            body_mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/{b.name}/mesh"))
+            body_mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/{b.name}/{b.name}"))
             body_points = np.asarray(body_mesh.GetPointsAttr().Get(), dtype=np.float64)
             body_triangles = np.asarray(body_mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
             meshes[b.name] = (body_points, body_triangles, body_points[mesh_edges(body_triangles)])

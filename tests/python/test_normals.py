@@ -63,7 +63,7 @@ def test_toml_caches_author_face_varying_normals(tmp_path):
     out = tmp_path / "box.usdc"
     simbake.bake(simbake.load_scene(scene_file), out, qa=False)
     stage = Usd.Stage.Open(str(out))
-    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/crate/mesh"))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/crate/crate"))
     assert mesh.GetNormalsInterpolation() == UsdGeom.Tokens.faceVarying
     normals = np.array(mesh.GetNormalsAttr().Get())
     assert len(normals) == len(mesh.GetFaceVertexIndicesAttr().Get())

@@ -118,7 +118,7 @@ def test_prim_layout(cache):
         ops = UsdGeom.Xformable(xf).GetOrderedXformOps()
         assert [op.GetOpName() for op in ops] == ["xformOp:translate", "xformOp:orient"]
         assert xf.GetAttribute("xformOp:translate").GetTypeName() == Sdf.ValueTypeNames.Double3
-        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/{name}/mesh"))
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/{name}/{name}"))
         assert mesh and mesh.GetPrim().GetTypeName() == "Mesh"
         assert mesh.GetSubdivisionSchemeAttr().Get() == "none"
         assert mesh.GetOrientationAttr().Get() == "rightHanded"

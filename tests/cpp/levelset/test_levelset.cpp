@@ -171,6 +171,36 @@ TEST(VdbLevelSet, SphereSignsAndFilledInterior) {
   }
 }
 
+// An open single-quad ground (2 x 2 m in y = 0) baked as a two-sided shell of thickness t:
+// the analytic answer is phi = |dist to the square| - t; trilinear interpolation of |d| is
+// off by at most h/2 right at the surface (the kink of |d|), ~0.2 h elsewhere in the band.
+TEST(VdbLevelSet, OpenQuadShellIsTwoSided) {
+  const double h = 0.05, t = 0.1;
+  Points v(4, 3);
+  v << -1, 0, -1, 1, 0, -1, 1, 0, 1, -1, 0, 1;
+  Triangles f(2, 3);
+  f << 0, 2, 1, 0, 3, 2;
+  const auto ls = VdbLevelSet::bake_shell(v, f, h, t);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> xz(-0.8, 0.8), y(-0.25, 0.25);
+  for (int i = 0; i < 500; ++i) {
+    const Vec3 p(xz(rng), y(rng), xz(rng));
+    const double expect = std::abs(p.y()) - t;
+    ASSERT_NEAR(ls->phi(p), expect, 0.5 * h) << p.transpose();
+    // negative on both sides within the thickness, positive beyond it
+    if (std::abs(p.y()) < t - 0.5 * h) ASSERT_LT(ls->phi(p), 0.0);
+    if (std::abs(p.y()) > t + 0.5 * h) ASSERT_GT(ls->phi(p), 0.0);
+    Vec3 n;
+    ls->phi_and_normal(p, n);
+    if (std::abs(p.y()) > h) ASSERT_LT(angle_deg(n, Vec3(0, p.y() > 0 ? 1 : -1, 0)), 5.0);
+  }
+  // beyond an edge: distance to the edge, less t
+  EXPECT_NEAR(ls->phi(Vec3(1.15, 0.0, 0.0)), 0.15 - t, 0.5 * h);
+  // far away: the background, 3 voxels outside the shell
+  EXPECT_NEAR(ls->phi(Vec3(0.0, 2.0, 0.0)), 3.0 * h, 1e-6);
+  EXPECT_THROW(VdbLevelSet::bake_shell(v, f, h, 0.5 * h), std::invalid_argument);
+}
+
 TEST(VdbLevelSet, SphereNormalsAndFallback) {
   const double h = 0.025;
   const auto ls = baked_sphere(h);
