@@ -3,6 +3,7 @@
 // (std::invalid_argument -> ValueError, std::runtime_error -> RuntimeError). No physics here.
 // Every index and number a method takes is checked here before it reaches the core (which
 // trusts its callers): a bad index is IndexError, a bad number ValueError, never a crash.
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -316,9 +317,32 @@ PYBIND11_MODULE(_core, m) {
       .def("step_frame", [](World& w, double frame_dt, int substeps) {
              positive(frame_dt, "frame_dt");
              if (substeps < 0) throw std::invalid_argument("substeps must be >= 0 (0 = automatic), got " + std::to_string(substeps));
-             py::gil_scoped_release release;
-             return w.step_frame(frame_dt, substeps);
-           }, py::arg("frame_dt"), py::arg("substeps") = 0)
+             // Signals while the frame steps: between substeps, at most every 50 ms, the GIL is
+             // taken back and Python's signal handlers run (PyErr_CheckSignals); one that raises
+             // (Ctrl-C's KeyboardInterrupt, the CLI's SIGTERM) stops the frame there and is
+             // raised here, so a signal ends a frame of thousands of substeps within 50 ms and a
+             // substep. Only time is looked at otherwise: the state is the same bits
+             using Clock = std::chrono::steady_clock;
+             constexpr auto kSignalPeriod = std::chrono::milliseconds(50);
+             Clock::time_point next = Clock::now() + kSignalPeriod;
+             bool raised = false;
+             const auto stop = [&] {
+               if (Clock::now() < next) return false;
+               py::gil_scoped_acquire acquire;
+               raised = PyErr_CheckSignals() != 0;  // (the exception stays set until raised below)
+               next = Clock::now() + kSignalPeriod;
+               return raised;
+             };
+             int taken;
+             {
+               py::gil_scoped_release release;
+               taken = w.step_frame(frame_dt, substeps, stop);
+             }
+             if (raised) throw py::error_already_set();
+             return taken;
+           }, py::arg("frame_dt"), py::arg("substeps") = 0,
+           "Steps one frame (substeps 0: automatic); returns the substeps taken. A Python signal "
+           "handler that raises during the frame (KeyboardInterrupt) stops it part-way and is raised")
       .def("step", [](World& w, double dt) {
              positive(dt, "dt");
              py::gil_scoped_release release;
@@ -382,6 +406,13 @@ PYBIND11_MODULE(_core, m) {
              d["self_collision_updates"] = s.self_collision.updates;
              d["self_collision_tests"] = s.self_collision.tests;
              d["self_collision_near_pairs"] = s.self_collision.near_pairs;
+             d["self_collision_over_budget"] = s.self_collision.over_budget;
+             d["impact_zone_yields"] = s.self_collision.yields;
+             d["cloth_let_in"] = s.self_collision.let_in;
+             d["cloth_gave"] = s.cloth_gave;
+             d["self_collision_candidate_peak"] = s.self_collision.candidate_peak;
+             d["self_collision_pass_peak"] = s.self_collision.pass_peak;
+             d["impact_zone_round_peak"] = s.self_collision.zone_round_peak;
              return d;
            })
       .def("quality", [](const World& w) {

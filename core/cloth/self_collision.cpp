@@ -694,6 +694,7 @@ void SelfCollision::self_pairs(int n, const Points& x, const Points& v, double d
                                std::array<std::vector<Pair>, 2>& out) {
   Tree& tree = trees_[0];
   const PatchTree::Node& node = tree.tree.nodes()[n];
+  if (full(out)) return;  // over the candidate budget: the search stops (start sees it)
   if (tree.tree.flat(n, normals_.normal, normals_.largest, x, v, dt)) {
     std::fill(tree.cull.begin() + node.leaf_begin, tree.cull.begin() + node.leaf_end, n);
     return;
@@ -709,7 +710,7 @@ void SelfCollision::self_pairs(int n, const Points& x, const Points& v, double d
 
 void SelfCollision::cross_pairs(int i, int a, int j, int b, std::array<std::vector<Pair>, 2>& out) const {
   const PatchTree::Node &na = trees_[i].tree.nodes()[a], &nb = trees_[j].tree.nodes()[b];
-  if (!na.box.intersects(nb.box)) return;
+  if (!na.box.intersects(nb.box) || full(out)) return;
   if (na.leaf() && nb.leaf()) {
     leaf_pairs(i, na.leaf_begin, j, nb.leaf_begin, out);
   } else if (na.leaf() || (!nb.leaf() && nb.end - nb.begin > na.end - na.begin)) {
@@ -836,12 +837,22 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
       query(trees_[i].tree, box, skipped(home, i), [&](int leaf) { visit(trees_[i], leaf); });
     }
   };
+  // the candidate budget: past it, the items add no more pairs (start then lets the set go;
+  // whichever items ran before is of no matter: the set is over the budget at any thread count)
+  std::atomic<long long> held{static_cast<long long>(kept)};
+  const auto over = [&] { return held.load(std::memory_order_relaxed) > pair_limit_; };
+  const auto tally = [&](size_t added) { held.fetch_add(static_cast<long long>(added), std::memory_order_relaxed); };
   // moved points against every triangle; touched triangles against the points that did not move
   parallel_collect(moved.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
+    if (over()) return;
+    const size_t before = out.size();
     const int k = moved[i];
     leaves_near(c.point_boxes[k], point_home_[k], [&](const Tree& tree, int leaf) { point_against_leaf(k, tree, leaf, out); });
+    tally(out.size() - before);
   });
   parallel_collect(triangles.size(), c.pairs[0], [&](size_t i, std::vector<Pair>& out) {
+    if (over()) return;
+    const size_t before = out.size();
     const int t = triangles[i];
     const auto offer = [&](int k) {
       if (!moving[k] && c.point_boxes[k].intersects(c.triangle_boxes[t]) && point_triangle_candidate(k, t)) {
@@ -852,9 +863,12 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
       for (int m = tree.point_first[leaf]; m < tree.point_first[leaf + 1]; ++m) offer(tree.points[m]);
     });
     for (int k : orphans_) offer(k);
+    tally(out.size() - before);
   });
   // touched edges against every edge (a pair of two touched edges once)
   parallel_collect(edges.size(), c.pairs[1], [&](size_t i, std::vector<Pair>& out) {
+    if (over()) return;
+    const size_t before = out.size();
     const int e = edges[i];
     leaves_near(c.edge_boxes[e], edge_home_[e], [&](const Tree& tree, int leaf) {
       for (int m = tree.edge_first[leaf]; m < tree.edge_first[leaf + 1]; ++m) {
@@ -863,6 +877,7 @@ void SelfCollision::search_moved(const Points& x, const Points& v, double dt, co
         out.push_back(edge_pair(e, f));
       }
     });
+    tally(out.size() - before);
   });
   start_.measured = false;
   ++stats.updates;
@@ -916,9 +931,20 @@ const SelfCollision::Start& SelfCollision::start(const Points& x, const Points& 
       c.frame_step[a] = std::isfinite(motion[motion.size() / 2]) ? motion[motion.size() / 2] : 0.0;
     }
   }
+  if (new_step) pass_work_ = 0;  // (a caller that holds the cloth still calls begin_step)
+  // the candidate budget: the searches stop past it, and a set over it is let go
+  pair_limit_ = static_cast<long long>(
+      std::min(settings.candidate_budget * std::max(vertex_count_, settings.budget_vertices), 4e18));
   bound_normals(x, v, dt, new_step);
   if (!update_candidates(x, v, dt, std::max(h, collision_tolerance(settings)), stats)) check_flat(x, v, dt, stats);
   activate_near(new_step, stats);
+  const long long held = static_cast<long long>(c.pairs[0].size() + c.pairs[1].size() + near_.pairs[0].size() +
+                                                near_.pairs[1].size());
+  stats.candidate_peak = std::max(stats.candidate_peak, held);
+  if (held > pair_limit_) {
+    stop_over_budget(stats);
+    return s;
+  }
   if (new_step || s.h != h) {
     // every pair measured again (in the same pass over the pairs that measures them)
     s.x = x;
@@ -974,7 +1000,19 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
                                        const SelfCollisionSettings& settings, std::vector<Contact>& out,
                                        SelfCollisionStatistics& stats) {
   out.clear();
+  if (over_budget_) return;
   start(x, v, dt, settings, stats);
+  if (over_budget_) return;
+  // the pass budget: the pairs this pass visits, with the step's earlier passes'
+  long long visits = 0;
+  for (int list = 0; list < 4; ++list) visits += static_cast<long long>(pair_list(list).size());
+  const double pass_limit = settings.pass_budget * std::max(vertex_count_, settings.budget_vertices);
+  if (static_cast<double>(pass_work_ + visits) > pass_limit) {
+    stop_over_budget(stats);
+    return;
+  }
+  pass_work_ += visits;
+  stats.pass_peak = std::max(stats.pass_peak, pass_work_);
   const double tolerance = collision_tolerance(settings);
   // this pass, and the vertices whose velocities changed since the last
   Passes& m = passes_;
@@ -997,8 +1035,18 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
   const double reach_limit = tolerance * (1.0 + 1e-6) + 1e-12;
   std::atomic<long long> tests{0};
   // the earliest contact of a pair over the step, if any; the pair marked clear otherwise
+  const std::vector<char>* yielding = settings.yielding;
   const auto test = [&](int kind, Pair& pair, std::vector<Contact>& found) {
     const std::array<int, 4>& ids = pair.vertex;
+    if (yielding) {
+      // an obstacle against a cloth item with a vertex it has let in: not kept apart
+      bool obstacle_side = false, let_in = false;
+      for (int k = 0; k < 4; ++k) {
+        obstacle_side = obstacle_side || obstacle(ids[k]);
+        let_in = let_in || (!obstacle(ids[k]) && (*yielding)[ids[k]]);
+      }
+      if (obstacle_side && let_in) return;
+    }
     if (pair.clear >= m.first && m.changed[ids[0]] <= pair.clear && m.changed[ids[1]] <= pair.clear &&
         m.changed[ids[2]] <= pair.clear && m.changed[ids[3]] <= pair.clear) {
       return;  // clear at a pass since which none of its vertices' velocities changed
@@ -1095,17 +1143,38 @@ void SelfCollision::collision_contacts(const Points& x, const Points& v, double 
 
 void SelfCollision::resolve(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                             const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
+  begin_step();
   repel(x, v, inverse_mass, dt, settings, stats);
   if (!collide(x, v, inverse_mass, dt, settings, stats, settings.collision_passes)) {
     impact_zones(x, v, inverse_mass, dt, settings, stats);
   }
 }
 
+void SelfCollision::begin_step() {
+  pass_work_ = 0;
+  over_budget_ = false;
+}
+
+void SelfCollision::stop_over_budget(SelfCollisionStatistics& stats) {
+  over_budget_ = true;
+  ++stats.over_budget;
+  // the candidates let go (all found again at the next step: the set over the budget, or cut
+  // short, is no good to keep), and the step's start forgotten
+  for (auto& pairs : candidates_.pairs) std::vector<Pair>().swap(pairs);
+  for (auto& pairs : near_.pairs) pairs.clear();
+  std::fill(near_.active.begin(), near_.active.end(), 0);
+  candidates_.pad = -1.0;
+  start_.x.resize(0, 3);
+  start_.proximity.clear();
+  start_.measured = false;
+}
+
 void SelfCollision::repel(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                           const SelfCollisionSettings& settings, SelfCollisionStatistics& stats) {
   const double h = settings.thickness;
-  if (!(h > 0.0)) return;
+  if (!(h > 0.0) || over_budget_) return;
   const std::vector<Contact>& contacts = start(x, v, dt, settings, stats).proximity;
+  if (over_budget_) return;
   // pairs in touch: the normal across both sides, turned against their approach now (before
   // any of this pass's impulses)
   std::vector<std::pair<size_t, Vec3>> touching;
@@ -1128,6 +1197,7 @@ bool SelfCollision::collide(const Points& x, Points& v, const Eigen::VectorXd& i
   std::vector<Contact> contacts;
   for (int pass = 0; pass < passes; ++pass) {
     collision_contacts(x, v, dt, settings, contacts, stats);
+    if (over_budget_) return false;
     if (contacts.empty()) return true;
     for (const Contact& c : contacts) {
       stats.collisions += apply_impulse(c, separation, settings.friction, v, inverse_mass, settings.support);
@@ -1143,11 +1213,13 @@ namespace {
 // zone holding vertices of infinite mass moves as they do: those of one obstacle (obstacle_of
 // >= 0) give the zone that obstacle's motion (motions[obstacle]), which carries the zone and
 // the obstacle by one invertible affine map, so that nothing in the zone passes through the
-// obstacle; a pinned cloth vertex, or two obstacles, hold the zone still. Vertices of
-// infinite mass keep their own velocities.
-void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
+// obstacle; a pinned cloth vertex, or two obstacles, hold the zone still, and so does the
+// surface under it where the obstacle would carry one of its vertices into that surface
+// faster than `sink` (m/s): the obstacle then passes through the cloth (returns true).
+// Vertices of infinite mass keep their own velocities.
+bool move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                   const Points* impulse, const std::vector<int>& obstacle_of, int cloth_vertices,
-                  const std::vector<ObstacleMotion>* motions, const std::vector<Vec3>* support) {
+                  const std::vector<ObstacleMotion>* motions, const std::vector<Vec3>* support, double sink) {
   int held_by = -1;       // the obstacle the zone holds, if one
   bool still = false;     // a pinned vertex, or two obstacles
   for (int i : zone) {
@@ -1158,12 +1230,27 @@ void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
   }
   if (still || held_by >= 0) {
     const ObstacleMotion* motion = still ? nullptr : &(*motions)[held_by];
+    // An obstacle that would carry a vertex of the zone into the still surface it rests on (a
+    // keyed box pressing the cloth into the ground) cannot be followed: the cloth cannot be in
+    // two places. The surface holds the zone, as a pin would, and the obstacle passes through
+    // the cloth there (from the next step on, its contacts and self-collision leave the
+    // vertices inside it alone: cloth_body_contact.cpp, SelfCollisionSettings::yielding).
+    // Followed, the zone went under the ground with the box, the edges from it to the cloth
+    // the ground held stretched by the box's travel every step (strain 5.3 after 0.16 s at
+    // 1 m/s), and the candidate pairs, the searches and the step's work with them doubled
+    // every frame until the cloth blew up (issue 30; benchmarks/stress/cloth_press.py)
+    bool yields = false;
+    for (int i : zone) {
+      if (!motion || !support || inverse_mass[i] <= 0.0 || !((*support)[i].squaredNorm() > 0.0)) continue;
+      yields = yields || Vec3(motion->A * row(x, i) + motion->c).dot((*support)[i].normalized()) < -sink;
+    }
+    if (yields) motion = nullptr;
     for (int i : zone) {
       if (inverse_mass[i] <= 0.0) continue;
       const Vec3 velocity = motion ? Vec3(motion->A * row(x, i) + motion->c) : Vec3::Zero();
       v.row(i) = velocity.transpose();
     }
-    return;
+    return yields;
   }
   double mass = 0.0;
   Vec3 center = Vec3::Zero(), momentum = Vec3::Zero();
@@ -1195,6 +1282,7 @@ void move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, cons
     for (int i : zone) into_support = into_support || rigid(i).dot((*support)[i]) < 0.0;
   }
   for (int i : zone) v.row(i) = (into_support ? Vec3::Zero() : rigid(i)).transpose();
+  return false;
 }
 
 }  // namespace
@@ -1212,8 +1300,11 @@ std::vector<std::vector<int>> SelfCollision::zone_members() const {
 
 void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                                const SelfCollisionSettings& settings, const Points& impulse) const {
+  if (over_budget_) return;
+  // (the zones that gave way to an obstacle in impact_zones give way again: the same step)
+  const double sink = collision_tolerance(settings) / passes_.dt;
   for (const std::vector<int>& zone : zone_members()) {
-    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support);
+    if (!zone.empty()) move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support, sink);
   }
 }
 
@@ -1225,7 +1316,11 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
   parent.resize(vertex_count_);
   std::iota(parent.begin(), parent.end(), 0);
   in_zone_.assign(vertex_count_, 0);
+  if (over_budget_) return;
   std::vector<char>& in_zone = in_zone_;
+  // an obstacle carrying a zone into the surface under it more than the collision tolerance
+  // over the step gives way (move_rigidly)
+  const double sink = collision_tolerance(settings) / dt;
   const auto find = [&](int i) {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
     return i;
@@ -1247,6 +1342,7 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     outside_zones(contacts);
     if (contacts.empty()) return;
     ++stats.zone_rounds;
+    stats.zone_round_peak = std::max<long long>(stats.zone_round_peak, round + 1);
     for (const Contact& c : contacts) {
       for (int k = 0; k < 4; ++k) {
         in_zone[c.vertex[k]] = 1;
@@ -1258,12 +1354,14 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     for (const std::vector<int>& zone : zone_members()) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
-      move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_, settings.obstacle_motion, settings.support);
+      stats.yields += move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_,
+                                   settings.obstacle_motion, settings.support, sink);
     }
   }
   // the last resort: the cloth does not move, and a cloth free of crossings stays free of them
   // (unless a moving obstacle runs into it: obstacles move as they must)
   collision_contacts(x, v, dt, settings, contacts, stats);
+  if (over_budget_) return;  // (the caller holds the cloth still)
   outside_zones(contacts);
   if (contacts.empty()) return;
   ++stats.stills;

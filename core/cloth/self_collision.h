@@ -86,7 +86,27 @@
 // members of their collision handling). Pairs within one obstacle are never candidates, and
 // pairs with an obstacle are not repelled: the cloth's contacts with the bodies hold it at
 // the thickness from them, with their friction. An impact zone holding an obstacle's
-// vertices moves with that obstacle (ObstacleMotion).
+// vertices moves with that obstacle (ObstacleMotion), unless that would carry one of its
+// vertices into the still surface it rests on (a keyed box pressing the cloth into the
+// ground): then the surface holds the zone and the obstacle passes through the cloth there.
+// Vertices the obstacles have let in (SelfCollisionSettings::yielding: inside one, or a
+// cloth stretched past what it can hold) are not kept out of them.
+//
+// Bounded work. Whatever the cloth does (a keyed body pressing it into the ground or through
+// its pins, a blown-up step), a step's self-collision costs at most a budget, and when the
+// budget runs out it says so and the caller has a fallback that keeps the guarantee above:
+//   - candidate pairs held at once: SelfCollisionSettings::candidate_budget a vertex (512).
+//     The searches stop as soon as they hold more (a blown-up 32 x 32 sheet had all 6.5
+//     million pairs of its triangles and edges as candidates, 13 searches a step, 100 s);
+//   - pairs visited by the step's collision passes, in all: pass_budget a vertex (16,384;
+//     a step makes at most 12 + 8 + 3 x 54 passes: the world's rounds, the zones' 50 each);
+//   - impact-zone rounds of a call: zone_iterations (50), as before.
+// The first two stop the step's self-collision (over_budget(); its later calls do nothing)
+// and the caller holds the cloth still for the step; the third holds it still at once (the
+// last resort). Both are counted (SelfCollisionStatistics: over_budget, stills), with the
+// largest figures seen (candidate_peak, pass_peak, zone_round_peak), for the pipeline's QA
+// to warn about. None of the shipped scenes comes near them: their peaks are 142 candidate
+// pairs a vertex, 3,456 pairs visited a vertex and step, 16 zone rounds (the heap).
 #pragma once
 
 #include "cloth/patch_tree.h"
@@ -129,6 +149,18 @@ struct SelfCollisionSettings {
   // (obstacles) or null: each obstacle's motion over the step (the impact zones that hold an
   // obstacle's vertices move with it; without it, they hold still)
   const std::vector<ObstacleMotion>* obstacle_motion = nullptr;
+  // (n) or null: 1 for the cloth's vertices that the obstacles no longer keep out (let in,
+  // they pass through the cloth there: contact/cloth_obstacles.h, yielding): pairs of an
+  // obstacle and an item with such a vertex are not tested
+  const std::vector<char>* yielding = nullptr;
+  // Budgets (see "Bounded work" at the top of this file): zone_iterations (above) bounds the
+  // impact-zone rounds of a call; these bound the pairs. The most a step may hold at once
+  // (the broad phase's and the near pairs) is candidate_budget, and the most its collision
+  // passes may visit in all is pass_budget, both per vertex (the cloth's and the obstacles',
+  // at least budget_vertices of them: a small cloth may take what a 64 x 64 one may)
+  double candidate_budget = 512.0;  // pairs a vertex (the heap: 142 at most; 16 KiB a vertex at 512)
+  double pass_budget = 16384.0;     // pairs visited a vertex and step (the heap: 3,456 at most)
+  int budget_vertices = 4096;
 };
 
 struct SelfCollisionStatistics {
@@ -142,6 +174,16 @@ struct SelfCollisionStatistics {
   long long updates = 0;       // times the pairs around the vertices that left their boxes were found again
   long long tests = 0;         // candidate pairs put through the continuous test (d - R at most the tolerance)
   long long near_pairs = 0;    // near pairs made candidates (where the sheet is not flat), in all steps
+  long long over_budget = 0;   // steps whose self-collision ran out of a budget (the cloth held still)
+  long long yields = 0;        // impact zones held still where their obstacle would have carried them
+                               // into the still surface under them (the obstacle passes through)
+  long long let_in = 0;        // steps in which the obstacles let cloth vertices in (yielding: the
+                               // cloth world counts them, contact/cloth_obstacles.h)
+  // the largest of their kind seen so far (maxima, not sums): candidate pairs held at once,
+  // pairs the collision passes of one step visited, impact-zone rounds of one call
+  long long candidate_peak = 0;
+  long long pass_peak = 0;
+  long long zone_round_peak = 0;
 };
 
 class SelfCollision {
@@ -155,8 +197,17 @@ class SelfCollision {
   SelfCollision(SelfCollision&&) noexcept;
   SelfCollision& operator=(SelfCollision&&) noexcept;
 
+  // A new step: its budgets (SelfCollisionSettings) start again. The caller of the three parts
+  // below calls it before each step (resolve does); until then a step that went over budget
+  // stays so
+  void begin_step();
+  // true once this step ran out of a budget: the three parts then do nothing, and the caller
+  // holds the cloth still for the step (its velocities zero: it stays free of crossings)
+  bool over_budget() const { return over_budget_; }
+
   // Changes v so that x + s dt v, s in [0, 1], never passes a layer through another: the
-  // three parts below in turn. inverse_mass (n): 0 for pinned vertices, which never move.
+  // three parts below in turn (a new step: begin_step first). inverse_mass (n): 0 for pinned
+  // vertices, which never move.
   void resolve(const Points& x, Points& v, const Eigen::VectorXd& inverse_mass, double dt,
                const SelfCollisionSettings& settings, SelfCollisionStatistics& stats);
 
@@ -278,6 +329,16 @@ class SelfCollision {
   Passes passes_;
   std::vector<char> in_zone_;
   std::vector<int> zone_parent_;  // (n) the last impact zones: union-find parents (a root is its own)
+  // this step's budgets (begin_step): pairs the collision passes visited, whether one ran out;
+  // and the most candidate pairs a search may hold (start sets it; the searches stop past it)
+  long long pass_work_ = 0;
+  bool over_budget_ = false;
+  long long pair_limit_ = 0;
+  bool full(const std::array<std::vector<Pair>, 2>& pairs) const {
+    return static_cast<long long>(pairs[0].size() + pairs[1].size()) > pair_limit_;
+  }
+  // this step's self-collision out of budget: counted, its candidates let go
+  void stop_over_budget(SelfCollisionStatistics& stats);
   Triangles triangles_;
   std::vector<std::array<int, 2>> edges_;
   int vertex_count_;    // the cloth's and the obstacles'

@@ -40,6 +40,11 @@ struct ContactBody {
   double inverse_mass = 0.0;              // (1/kg); 0 for kinematic bodies
   bool kinematic = false;
   bool still = false;                     // static, or kinematic and not moving this step
+  // (cloth vertices) or null: the vertices this body, kinematic and moving, passes through
+  // this step, no contact pushing them out (a keyed obstacle the cloth has let in:
+  // contact/cloth_obstacles.h); it passes through those inside it at the step's start that a
+  // still surface holds, too
+  const std::vector<char>* let_in = nullptr;
 };
 
 // The ground plane y = height, as the contacts see it

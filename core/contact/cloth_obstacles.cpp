@@ -29,7 +29,7 @@ bool ClothObstacles::select(const ContactBodies& bodies) {
 }
 
 void ClothObstacles::begin_step(const Cloth& cloth, const ContactBodies& bodies, const Eigen::VectorXd& inverse_mass,
-                                double dt) {
+                                double dt, double give) {
   cloth_vertices_ = cloth.vertex_count();
   Eigen::Index n = cloth_vertices_;
   for (const TriangleMesh& m : mesh_) n += m.vertices.rows();
@@ -54,6 +54,23 @@ void ClothObstacles::begin_step(const Cloth& cloth, const ContactBodies& bodies,
     const Mat3 turn = to.rotation * from.rotation.transpose();
     motion_[o].A = (turn - Mat3::Identity()) / dt;
     motion_[o].c = (to.translation - turn * from.translation) / dt;
+  }
+  // the cloth's vertices no obstacle keeps out (yielding()): inside one at its start pose, or
+  // near one when the cloth gives
+  yielding_.assign(n, 0);
+  any_yielding_ = false;
+  for (size_t o = 0; o < body_.size(); ++o) {
+    const ContactBody& body = bodies.body(body_[o]);
+    Box3 near = body.shape->bounds();
+    near.min().array() -= give;
+    near.max().array() += give;
+    for (int k = 0; k < cloth_vertices_; ++k) {
+      if (!(inverse_mass_[k] > 0.0)) continue;  // pinned: never moves (the flag's pins are inside its pole)
+      const Vec3 p = body.start_pose.apply_inverse(Vec3(x_.row(k).transpose()));
+      if (!near.contains(p)) continue;
+      const double phi = body.shape->phi(p);
+      if (phi < give) yielding_[k] = any_yielding_ = true;  // (inside: phi < 0 <= give)
+    }
   }
 }
 

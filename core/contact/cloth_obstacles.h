@@ -36,17 +36,29 @@ class ClothObstacles {
   // self-collision must be made again with meshes())
   bool select(const ContactBodies& bodies);
   bool empty() const { return body_.empty(); }
+  const std::vector<int>& bodies() const { return body_; }  // (obstacles) body index
   // (obstacles) each obstacle's mesh in its own coordinates (a box's 8 corners)
   const std::vector<TriangleMesh>& meshes() const { return mesh_; }
 
   // The step's arrays: the cloth's positions and inverse masses, then the obstacles' vertices
   // at the start pose and their velocities to the pose now, inverse mass 0; and each
-  // obstacle's motion (the velocity field of its lines)
-  void begin_step(const Cloth& cloth, const ContactBodies& bodies, const Eigen::VectorXd& inverse_mass, double dt);
+  // obstacle's motion (the velocity field of its lines). `give` (m): when the cloth is
+  // stretched past what its strain limit can hold, the reach of its giving (see yielding); 0
+  // when it is not
+  void begin_step(const Cloth& cloth, const ContactBodies& bodies, const Eigen::VectorXd& inverse_mass, double dt,
+                  double give = 0.0);
   const Points& positions() const { return x_; }
   Points& velocities() { return v_; }
   const Eigen::VectorXd& inverse_mass() const { return inverse_mass_; }
   const std::vector<ObstacleMotion>& motions() const { return motion_; }
+  // (n) 1 for the cloth's free vertices that no obstacle keeps out in this step
+  // (SelfCollisionSettings::yielding): those inside one at the step's start, and, when the
+  // cloth gives, those within `give` of one. A keyed box pushing a cloth held
+  // by its pins carries it along (the obstacles' continuous test and impact zones keep the
+  // cloth out of the box) until the cloth gives: stretched past kGiveStrain times its limit,
+  // it lets the box through, and the box no longer holds the vertices it has let in
+  const std::vector<char>& yielding() const { return yielding_; }
+  bool any_yielding() const { return any_yielding_; }
   const std::vector<Vec3>& support() const { return support_; }
   // the cloth's velocities and supports into the arrays; the cloth's velocities back out
   void load(const Points& cloth_velocities, const std::vector<Vec3>& cloth_support);
@@ -63,6 +75,8 @@ class ClothObstacles {
   Eigen::VectorXd inverse_mass_;
   std::vector<Vec3> support_;
   std::vector<ObstacleMotion> motion_;
+  std::vector<char> yielding_;
+  bool any_yielding_ = false;
 };
 
 }  // namespace simbake

@@ -39,6 +39,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -126,6 +127,8 @@ struct StepStatistics {
   double potential_energy = 0.0;   // gravity, -m g.x (J), now
   long long impulses = 0;          // collision and contact impulses applied, in total
   SelfCollisionStatistics self_collision;  // the cloths' self-collision work, in total
+  long long cloth_gave = 0;        // cloth steps in which a cloth was stretched past what its strain
+                                   // limit can hold (cloth_stages.cpp, kGiveStrain), in total
   bool finite = true;              // false once any state went NaN or infinite
 };
 
@@ -167,8 +170,11 @@ class World {
   double time() const { return time_; }  // (s) simulated so far
 
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
-  // substeps == 0; returns the number of substeps taken
-  int step_frame(double frame_dt, int substeps = 0);
+  // substeps == 0; returns the number of substeps taken. `stop`, if given, is asked before
+  // each substep after the first (it must be cheap: the bindings' looks at the clock and, every
+  // 50 ms, at Python's signals); when it says true the frame ends there, part-way, without
+  // its statistics, and the world is left at that substep. It changes nothing else
+  int step_frame(double frame_dt, int substeps = 0, const std::function<bool()>& stop = nullptr);
   // One substep: the stages in order, the cloths stepped with the bodies
   void step(double dt);
   // Substeps the automatic rule picks for the next frame (a multiple of the cloth steps)
@@ -231,7 +237,8 @@ class World {
   };
   FrameSchedule frame_schedule(double frame_dt) const;
   double thinnest_body() const;                                      // (m), infinite with no body
-  double body_travel_steps(double frame_dt, double thinnest) const;  // steps that keep each body's travel short
+  // steps that keep each body's travel short (with `reach`: kinematic bodies only near that box)
+  double body_travel_steps(double frame_dt, double thinnest, const Box3* reach = nullptr, double reach_speed = 0.0) const;
   // the speed (m/s) of body i's fastest point over the next frame: its velocities now or, for a
   // keyed body, its track's travel over the frame; gravity's gain over the frame for a dynamic body
   double body_speed(int i, double frame_dt) const;

@@ -13,7 +13,8 @@ traceback (README, "Guarantees").
 
 SIGTERM and SIGHUP are turned into an exception in the main thread, as Ctrl-C is, so every
 ``with`` block and ``finally`` on the way out removes its temp file. A signal that arrives
-while the core steps a frame (the GIL released) takes effect when that frame ends.
+while the core steps a frame (the GIL released) takes effect within 50 ms and one substep:
+``World.step_frame`` lets the handlers run between substeps and raises what they raise.
 """
 
 from __future__ import annotations

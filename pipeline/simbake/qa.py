@@ -22,6 +22,12 @@ Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
 * ``energy_gain``, ``unexplained_stop``, ``imparted_speed``: energy made up by the solver, a
   body stopping in mid-air, a body launched faster than anything but a keyed body could make
   it (simbake.qa_motion, where each is defined with its threshold).
+* ``cloth_fallbacks``: 0. The cloth steps' fallbacks in the frame (README, "Bounded work"):
+  steps a cloth held still (its impact zones did not settle, or its self-collision ran out
+  of its work budget), impact zones a keyed body would have pressed into the ground, steps
+  in which a cloth let a keyed body through it, and steps in which a cloth was stretched
+  past three times its strain limit. Each is a place the cloth could not do what it was
+  asked to.
 
 The JSON layout (version 1)::
 
@@ -30,7 +36,8 @@ The JSON layout (version 1)::
      "figures": {"substeps": [...], "wall_seconds": [...], "kinetic_energy": [...],
                  "body_penetration": [...], "body_penetration_between": [[a, b] | null],
                  "cloth_penetration": [...], "cloth_strain": [...],
-                 "cloth_self_intersections": [...], "energy_gain": [...],
+                 "cloth_self_intersections": [...], "cloth_fallbacks": [...],
+                 "energy_gain": [...],
                  "unexplained_stop": [...], "unexplained_stop_body": [name | null],
                  "imparted_speed": [...], "imparted_speed_body": [name | null]},
      "cloths": {name: {"strain": [...], "self_intersections": [...],
@@ -60,6 +67,8 @@ BODY_PENETRATION = 5e-3       # (m)
 CLOTH_PENETRATION = 1e-3      # (m)
 STRAIN_MARGIN = 0.01          # of the strain limit
 MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
+# World.statistics() counters of the cloth step's fallbacks (README "Bounded work"), summed
+FALLBACKS = ("cloth_held_still", "self_collision_over_budget", "impact_zone_yields", "cloth_let_in", "cloth_gave")
 
 
 _MOTION = ("energy_gain", "unexplained_stop", "unexplained_stop_body", "imparted_speed", "imparted_speed_body")
@@ -81,6 +90,7 @@ def thresholds(scene: Scene) -> dict[str, float | None]:
         "cloth_strain": max(limits) * (1 + STRAIN_MARGIN) if limits else None,
         "cloth_self_intersections": 0 if scene.cloths else None,
         "substeps": MAX_SUBSTEPS - 1 if scene.substeps == 0 else None,  # a fixed count is the scene's
+        "cloth_fallbacks": 0 if scene.cloths else None,
         "kinetic_energy": None,
         "wall_seconds": None,
     }
@@ -100,7 +110,8 @@ class QualityRecorder:
         self.figures: dict[str, list] = {k: [] for k in (
             "substeps", "wall_seconds", "kinetic_energy", "body_penetration",
             "body_penetration_between", "cloth_penetration", "cloth_strain",
-            "cloth_self_intersections") + (_MOTION if motion is not None else ())}
+            "cloth_self_intersections", "cloth_fallbacks") + (_MOTION if motion is not None else ())}
+        self._fallbacks = 0  # the fallbacks counted up to the last recorded frame
         self.cloths: dict[str, dict[str, list]] = {
             name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
                    "edge_penetration": []} for name in self.cloth_names}
@@ -118,7 +129,11 @@ class QualityRecorder:
         f = self.figures
         f["substeps"].append(int(substeps))
         f["wall_seconds"].append(float(wall_seconds))
-        f["kinetic_energy"].append(float(world.statistics()["kinetic_energy"]))
+        stats = world.statistics()
+        f["kinetic_energy"].append(float(stats["kinetic_energy"]))
+        fallbacks = sum(int(stats.get(k, 0)) for k in FALLBACKS)
+        f["cloth_fallbacks"].append(fallbacks - self._fallbacks)
+        self._fallbacks = fallbacks
         if self.motion is not None:
             self._record_motion(frame, world, origins, quality["body_penetration"][0] > BODY_PENETRATION)
         depth, a, b = quality["body_penetration"]
@@ -203,6 +218,8 @@ class QualityRecorder:
             over(f"cloth {name!r} strain", c["strain"], self.limits[name], "%", 1e2)
             over(f"cloth {name!r} self-intersections", c["self_intersections"], 0, "pairs", 1)
         over("substeps at the solver's cap", self.figures["substeps"], self.thresholds["substeps"], "", 1)
+        over("cloth fallbacks (steps held still, bodies let through the cloth)", self.figures["cloth_fallbacks"],
+             self.thresholds["cloth_fallbacks"], "", 1)
         if self.motion is not None:
             self._motion_warnings(over)
         return lines

@@ -244,3 +244,44 @@ TEST(ClosestPoints, Segments) {
   EXPECT_EQ(s, 0.0);
   EXPECT_NEAR(t, 0.5, 1e-15);
 }
+
+// A moving keyed body passes through the vertices the cloth let into it (ContactBody::let_in:
+// a keyed obstacle the cloth gave way to, contact/cloth_obstacles.h) and those inside it at
+// the step's start that a still surface holds (the ground it presses the cloth into): neither
+// is pushed. One inside it that nothing else holds (a curtain it crosses), one outside it
+// that the step would take inside, and one inside a still body are pushed out to the thickness
+TEST(ClothBodyContact, AMovingKeyedBodyPassesThroughTheVerticesHeldInsideIt) {
+  const double h = 0.005, r = 0.5, dt = 0.01;
+  const SphereDistance shape(r);
+  const std::vector<char> flags = {1, 0, 0};
+  struct Case {
+    double start;        // the vertex's height over the sphere's centre (the sphere at rest)
+    double speed;        // its velocity, down (m/s)
+    bool moving, let_in, on_ground, pushed;
+  };
+  for (const Case& c : {Case{r + 0.01, 11.0, true, false, false, true}, Case{r + 0.01, 11.0, true, true, false, false},
+                        Case{r - 0.1, 0.0, true, false, false, true}, Case{r - 0.1, 0.0, true, false, true, false},
+                        Case{r - 0.1, 0.0, false, false, true, true}}) {
+    Cloth cloth = one_free_vertex(Vec3(0.0, c.start, 0.0));
+    ClothBodyContact contact(cloth, 0.5, h);
+    PlainBodies bodies;
+    if (c.on_ground) {
+      // the ground 1 mm above the vertex: its contact this step makes the vertex one a still
+      // surface holds (a first pass, the sphere not there yet); then the step's next pass
+      bodies.ground_ = ContactGround{c.start + 0.001, 0.5};
+      contact.collide(cloth, bodies, dt);
+      bodies.ground_.reset();
+    }
+    bodies.add(sphere(shape, r, Vec3::Zero(), 0.0), Mat3::Zero());
+    bodies.bodies[0].still = !c.moving;  // (keyed and moving, at rest within this step's test)
+    if (c.let_in) bodies.bodies[0].let_in = &flags;
+    cloth.velocities().row(0) << 0.0, -c.speed, 0.0;
+    contact.collide(cloth, bodies, dt);
+    const Vec3 candidate = (cloth.positions().row(0) + dt * cloth.velocities().row(0)).transpose();
+    if (c.pushed) {
+      EXPECT_NEAR(candidate.norm() - r, h, 1e-12) << c.start << " " << c.moving << " " << c.on_ground;
+    } else {
+      EXPECT_EQ(cloth.velocities()(0, 1), -c.speed) << c.start << " " << c.let_in << " " << c.on_ground;
+    }
+  }
+}

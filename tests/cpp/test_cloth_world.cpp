@@ -6,6 +6,8 @@
 #include "test_support.h"
 #include "world/quality.h"
 
+#include <memory>
+
 using namespace simbake;
 using namespace simbake::test;
 
@@ -414,4 +416,58 @@ TEST(ClothWorld, AKeyedBoxPloughingASheetNeverPokesThroughIt) {
               crossed_frames, deep_frames, layered_frames);
   // it did plough: the sheet's vertices were pushed on ahead of the box
   EXPECT_GT(world.cloth(0).positions().col(0).maxCoeff(), 0.55);
+}
+
+// step_frame's `stop` (the bindings' signal check) is asked between substeps and changes
+// nothing else: a frame of 8 substeps stopped at its third ask is the world after three
+// substeps (World::step each), bit for bit; one never stopped is the frame without a stop
+TEST(ClothWorld, AFrameStoppedBetweenSubstepsIsTheSubstepsItTook) {
+  const auto make = [] {
+    auto world = std::make_unique<World>();
+    world->set_ground(GroundDef{0.0, 0.5, 0.0});
+    BodyDesc ball = sphere_body(0.3, 1.0, Vec3(0.0, 0.3, 0.0));
+    ball.kinematic = true;
+    world->add_body(ball);
+    world->add_cloth(square_cloth(1.0, 12, Vec3(0.0, 0.65, 0.0)), 0.4, 0.005);
+    for (int f = 0; f < 6; ++f) world->step_frame(1.0 / 24.0);  // the cloth on the ball
+    return world;
+  };
+  const double frame = 1.0 / 24.0;
+  auto stopped = make(), stepped = make(), asked = make(), plain = make();
+  int asks = 0;
+  EXPECT_EQ(stopped->step_frame(frame, 8, [&] { return ++asks == 3; }), 3);
+  EXPECT_EQ(asks, 3);
+  for (int k = 0; k < 3; ++k) stepped->step(frame / 8);
+  EXPECT_TRUE(stopped->cloth(0).positions() == stepped->cloth(0).positions());
+  EXPECT_TRUE(stopped->cloth(0).velocities() == stepped->cloth(0).velocities());
+  EXPECT_EQ(stopped->time(), stepped->time());
+  asks = 0;
+  EXPECT_EQ(asked->step_frame(frame, 0, [&] { ++asks; return false; }), plain->step_frame(frame, 0));
+  EXPECT_GT(asks, 0);
+  EXPECT_TRUE(asked->cloth(0).positions() == plain->cloth(0).positions());
+  EXPECT_EQ(asked->statistics().cloth_steps, plain->statistics().cloth_steps);
+}
+
+// A keyed body far from the cloth asks it for no steps of its own when no dynamic body can
+// meet it (it passes through the ground and other kinematic bodies): a sphere keyed down at
+// 1 km/s 100 m away leaves the cloth at its 5 steps a frame (the bodies still take their 695
+// substeps, which cost nothing). With a dynamic body in the scene its travel counts as before.
+// Counted, a keyed body at 1 km/s held the cloth at 695 steps a frame long after it had gone
+// through it (benchmarks/stress/cloth_press.py)
+TEST(ClothWorld, AKeyedBodyFarFromTheClothAsksItForNoSteps) {
+  const double frame = 1.0 / 24.0;
+  for (const bool dynamic : {false, true}) {
+    World world;
+    BodyDesc ball = sphere_body(0.15, 1.0, Vec3(100.0, 0.0, 0.0));
+    ball.kinematic = true;
+    const int b = world.add_body(ball);
+    world.set_kinematic_track(b, KinematicTrack({0.0, 1.0}, {Vec3(100.0, 0.0, 0.0), Vec3(100.0, -1000.0, 0.0)},
+                                                {Quat::Identity(), Quat::Identity()}));
+    world.add_cloth(square_cloth(1.0, 17, Vec3::Zero()), 0.4, 0.005);
+    if (dynamic) world.add_body(sphere_body(0.15, 1.0, Vec3(-50.0, 0.0, 0.0)));
+    const int travel = static_cast<int>(std::ceil(1000.0 * frame / (0.2 * 0.3)));
+    EXPECT_EQ(travel, 695);
+    EXPECT_EQ(world.automatic_cloth_steps(frame), dynamic ? travel : 5) << dynamic;
+    EXPECT_GE(world.automatic_substeps(frame), travel) << dynamic;
+  }
 }

@@ -258,9 +258,11 @@ TEST(SelfCollision, ShakenClothNeverCrosses) {
   // (relative to the momentum scale: total mass x the mean speed)
   const double scale = cloth.masses().sum() * 3.0;
   EXPECT_LT((momentum(cloth.velocities(), inverse_mass) - start).norm(), 1e-6 * scale);
-  std::printf("  shaken cloth: %lld repulsions, %lld collision impulses, %lld zone rounds, %lld stills\n",
-              world.statistics().self_collision.repulsions, world.statistics().self_collision.collisions,
-              world.statistics().self_collision.zone_rounds, world.statistics().self_collision.stills);
+  const SelfCollisionStatistics& stats = world.statistics().self_collision;
+  std::printf("  shaken cloth: %lld repulsions, %lld collision impulses, %lld zone rounds, %lld stills, "
+              "%lld over budget, peaks: %lld candidates, %lld pairs visited a step, %lld zone rounds a call; "
+              "%lld steps gave\n", stats.repulsions, stats.collisions, stats.zone_rounds, stats.stills, stats.over_budget,
+              stats.candidate_peak, stats.pass_peak, stats.zone_round_peak, world.statistics().cloth_gave);
 }
 
 TEST(SelfCollision, SameBitsAtAnyThreadCount) {
@@ -530,4 +532,182 @@ TEST(SelfCollision, AnImpactZoneWithAnObstacleMovesWithIt) {
     EXPECT_NEAR((s.v.row(k).transpose() - expected).norm(), 0.0, 1e-9) << k;
   }
   EXPECT_FALSE(corner_crosses(s.x, s.v, dt, 3));
+}
+
+// ---- bounded work: every loop of a step that can grow has a budget and a fallback
+// (SelfCollisionSettings; README "Bounded work")
+
+namespace {
+
+// the upper layer of a cloth folded 1 cm over itself falling at 1 m/s onto the lower one:
+// the layers meet within a 10 ms step, so candidates, collisions and zones all have work
+struct FallingFold {
+  ClothDesc desc = folded_grid(21, 0.01);
+  Points x = desc.rest;
+  Points v = Points::Zero(desc.rest.rows(), 3);
+  Eigen::VectorXd inverse_mass = Eigen::VectorXd::Ones(desc.rest.rows());
+  int n = static_cast<int>(desc.rest.rows());
+  FallingFold() {
+    for (int k = 0; k < n; ++k) {
+      if (x(k, 1) > 0.005) v(k, 1) = -1.0;
+    }
+  }
+};
+
+// the cloth triangle of AMovingObstacleCarriesTheClothItMeets at y = 0 and the horizontal
+// obstacle triangle (the lid), wider than it, 0.1 m above it
+struct LidOverTriangle {
+  Points cloth = Points(3, 3);
+  TriangleMesh lid;
+  Triangles t = Triangles(1, 3);
+  LidOverTriangle() {
+    cloth << 0, 0, 0, 0, 0, 1, 1, 0, 0;
+    lid.vertices.resize(3, 3);
+    lid.vertices << -1, 0.1, -1, -1, 0.1, 3, 3, 0.1, -1;
+    lid.triangles.resize(1, 3);
+    lid.triangles << 0, 1, 2;
+    t << 0, 1, 2;
+  }
+};
+
+}  // namespace
+
+TEST(SelfCollision, OverItsCandidateBudgetAStepStopsAndSaysSo) {
+  // with the default budgets the step finds its candidates and resolves the fold; with 1
+  // candidate pair a vertex allowed, the search stops past n pairs (well short of all of
+  // them), the step is over budget, counted once, and its calls change nothing; the next
+  // step (begin_step) with the default budget resolves the fold again
+  const double dt = 0.01;
+  const FallingFold fold;
+  SelfCollisionSettings settings{0.005, 0.3};
+  SelfCollisionStatistics full;
+  {
+    SelfCollision self(fold.desc.triangles, fold.n);
+    Points v = fold.v;
+    self.resolve(fold.x, v, fold.inverse_mass, dt, settings, full);
+    EXPECT_FALSE(self.over_budget());
+    EXPECT_EQ(full.over_budget, 0);
+  }
+  ASSERT_GT(full.candidate_peak, 4 * fold.n);  // the case is what it says
+  SelfCollision self(fold.desc.triangles, fold.n);
+  settings.candidate_budget = 1.0;
+  settings.budget_vertices = 0;  // (else it counts a 64 x 64 cloth's)
+  SelfCollisionStatistics stats;
+  Points v = fold.v;
+  self.begin_step();
+  self.repel(fold.x, v, fold.inverse_mass, dt, settings, stats);
+  EXPECT_TRUE(self.over_budget());
+  EXPECT_FALSE(self.collide(fold.x, v, fold.inverse_mass, dt, settings, stats, 4));
+  self.impact_zones(fold.x, v, fold.inverse_mass, dt, settings, stats);
+  EXPECT_EQ(v, fold.v);  // nothing done: the caller holds the cloth still
+  EXPECT_EQ(stats.over_budget, 1);
+  EXPECT_EQ(stats.repulsions + stats.collisions + stats.zone_rounds, 0);
+  EXPECT_GT(stats.candidate_peak, fold.n);
+  EXPECT_LT(stats.candidate_peak, full.candidate_peak / 2);  // it stopped short, not after
+  settings.candidate_budget = SelfCollisionSettings().candidate_budget;
+  self.resolve(fold.x, v, fold.inverse_mass, dt, settings, stats);  // (begins a step)
+  EXPECT_FALSE(self.over_budget());
+  EXPECT_EQ(stats.over_budget, 1);
+  EXPECT_GT(stats.collisions + stats.zone_rounds, 0);
+  EXPECT_TRUE(intersecting_triangle_pairs(fold.x + dt * v, fold.desc.triangles).empty());
+}
+
+TEST(SelfCollision, OverItsPassBudgetAStepStopsAndSaysSo) {
+  // the collision passes of a step may visit pass_budget pairs a vertex in all: at 1, the
+  // first pass (visiting every candidate, more than n) would exceed it, so none runs
+  const double dt = 0.01;
+  const FallingFold fold;
+  SelfCollisionSettings settings{0.005, 0.3};
+  settings.pass_budget = 1.0;
+  settings.budget_vertices = 0;
+  SelfCollision self(fold.desc.triangles, fold.n);
+  SelfCollisionStatistics stats;
+  Points v = fold.v;
+  self.begin_step();
+  EXPECT_FALSE(self.collide(fold.x, v, fold.inverse_mass, dt, settings, stats, 4));
+  EXPECT_TRUE(self.over_budget());
+  EXPECT_EQ(stats.over_budget, 1);
+  EXPECT_EQ(stats.collisions, 0);
+  EXPECT_EQ(stats.pass_peak, 0);
+  EXPECT_EQ(v, fold.v);
+  // the default allows the whole of this step's passes, and records what they visited
+  settings.pass_budget = SelfCollisionSettings().pass_budget;
+  self.resolve(fold.x, v, fold.inverse_mass, dt, settings, stats);
+  EXPECT_FALSE(self.over_budget());
+  EXPECT_GT(stats.pass_peak, 0);
+  EXPECT_LT(stats.pass_peak, settings.pass_budget * fold.n);
+  EXPECT_LT(stats.candidate_peak, settings.candidate_budget * fold.n);
+}
+
+TEST(SelfCollision, ImpactZonesThatDoNotSettleHoldTheClothStill) {
+  // the last resort of the zone rounds' budget (zone_iterations): with none allowed, the
+  // point falling through a triangle is not resolved by zones, and the cloth holds still
+  Points x(4, 3), v(4, 3);
+  x << 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.25, 0.1, 0.25;
+  v.setZero();
+  v.row(3) << 0.0, -30.0, 0.0;
+  Triangles t(1, 3);
+  t << 0, 2, 1;
+  SelfCollision self(t, 4);
+  SelfCollisionSettings settings{0.005, 0.0};
+  settings.collision_passes = 0;
+  settings.zone_iterations = 0;
+  SelfCollisionStatistics stats;
+  self.resolve(x, v, Eigen::VectorXd::Ones(4), 0.01, settings, stats);
+  EXPECT_EQ(stats.stills, 1);
+  EXPECT_EQ(v.norm(), 0.0);
+  settings.zone_iterations = 50;  // one round is enough
+  v.row(3) << 0.0, -30.0, 0.0;
+  self.resolve(x, v, Eigen::VectorXd::Ones(4), 0.01, settings, stats);
+  EXPECT_EQ(stats.stills, 1);
+  EXPECT_EQ(stats.zone_round_peak, 1);
+}
+
+TEST(SelfCollision, AZoneAKeyedObstacleWouldPressIntoTheGroundHoldsStill) {
+  // the lid of AMovingObstacleCarriesTheClothItMeets coming down at 30 m/s onto a cloth
+  // triangle lying on the ground (its vertices' support: +y), straight to the impact zones:
+  // the zone of the triangle and the lid cannot follow the lid into the ground; it holds
+  // still and the lid passes through (yields). Off the ground it follows the lid
+  const LidOverTriangle scene;
+  const Points& cloth = scene.cloth;
+  const TriangleMesh& lid = scene.lid;
+  const Triangles& t = scene.t;
+  for (const bool on_ground : {false, true}) {
+    ClothAndObstacle s(cloth, lid, Vec3(0.0, -30.0, 0.0));
+    std::vector<Vec3> support(6, Vec3::Zero());
+    if (on_ground) support[0] = support[1] = support[2] = Vec3(0.0, 1.0, 0.0);
+    SelfCollision self(t, 3, {lid});
+    SelfCollisionSettings settings{0.005, 0.3};
+    settings.collision_passes = 0;
+    settings.obstacle_motion = &s.motion;
+    settings.support = &support;
+    SelfCollisionStatistics stats;
+    self.resolve(s.x, s.v, s.inverse_mass, 0.01, settings, stats);
+    EXPECT_GT(stats.zone_rounds, 0);
+    EXPECT_EQ(stats.stills, 0);
+    EXPECT_EQ(stats.yields, on_ground ? 1 : 0);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(s.v(k, 1), on_ground ? 0.0 : -30.0) << k << " " << on_ground;
+  }
+}
+
+TEST(SelfCollision, AnObstacleNoLongerKeepsOutTheVerticesLetIn) {
+  // the same lid onto the same triangle in the air: the lid carries it down, unless the
+  // triangle's vertices are let in (SelfCollisionSettings::yielding): then nothing is
+  // tested between them and the lid, which passes through
+  const LidOverTriangle scene;
+  const Points& cloth = scene.cloth;
+  const TriangleMesh& lid = scene.lid;
+  const Triangles& t = scene.t;
+  for (const bool let_in : {false, true}) {
+    ClothAndObstacle s(cloth, lid, Vec3(0.0, -30.0, 0.0));
+    const std::vector<char> yielding = {1, 1, 1, 0, 0, 0};
+    SelfCollision self(t, 3, {lid});
+    SelfCollisionSettings settings{0.005, 0.3};
+    settings.obstacle_motion = &s.motion;
+    if (let_in) settings.yielding = &yielding;
+    SelfCollisionStatistics stats;
+    self.resolve(s.x, s.v, s.inverse_mass, 0.01, settings, stats);
+    EXPECT_EQ(stats.collisions == 0, let_in);
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(s.v(k, 1), let_in ? 0.0 : -30.0, 1e-2) << k;
+  }
 }
