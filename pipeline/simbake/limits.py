@@ -60,7 +60,7 @@ BUFFERED_FRAMES = 50             # frames the writer holds between saves (CacheW
 SELF_COLLISION_BYTES = 30720     # per vertex at crowding 1, for a sheet that bends and swings
 CROWDING_EXPONENT = 1.7          # (fitted from crowding 0.08 to 0.71: 64^2 to 384^2 vertices on
                                  # 2 m at 5 mm; one that folds into layers keeps up to 4x more:
-                                 # README, "Limits that remain")
+                                 # README, "Limitations")
 SELF_COLLISION_FRAMES = 13       # frames by which they have all appeared (measured: none at 2, all at 13)
 RIGID_SAMPLE_BYTES = 120         # writer memory per dynamic body and frame (USD holds rigid
                                  # samples unpacked until the file is closed: ~60 B each)
