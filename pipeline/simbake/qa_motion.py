@@ -75,13 +75,11 @@ class MotionFigures:
 
     def _rigid(self, world):
         """Centres of mass, velocities and energies of the dynamic bodies now."""
-        states = [world.body_state(int(i)) for i in np.flatnonzero(self.dynamic)]
-        if not states:
+        if not np.any(self.dynamic):
             return np.zeros((0, 3)), 0.0, 0.0, 0.0
-        x = np.array([s["center_of_mass"] for s in states])
-        v = np.array([s["linear_velocity"] for s in states])
-        w = np.array([s["angular_velocity"] for s in states])
-        spin = np.einsum("ij,ij->i", w, np.array([s["angular_momentum"] for s in states]))
+        states = world.body_states()
+        x, v, w = (np.asarray(states[key])[self.dynamic] for key in ("center_of_mass", "linear_velocity", "angular_velocity"))
+        spin = np.einsum("ij,ij->i", w, np.asarray(states["angular_momentum"])[self.dynamic])
         m = self.masses[self.dynamic]
         kinetic = float(0.5 * (m * np.einsum("ij,ij->i", v, v)).sum() + 0.5 * spin.sum())
         potential = float(-(m * (x @ self.gravity)).sum())
