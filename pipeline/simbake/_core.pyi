@@ -43,6 +43,9 @@ class LevelSet:
     @staticmethod
     def bake(vertices: Array, triangles: IndexArray, voxel_size: float) -> LevelSet: ...
     @staticmethod
+    def bake_shell(vertices: Array, triangles: IndexArray, voxel_size: float, thickness: float) -> LevelSet:
+        """Any triangle soup (open, non-manifold) as a two-sided shell: phi = |d| - thickness (m)."""
+    @staticmethod
     def read(path: str) -> LevelSet: ...
     def write(self, path: str, metadata: dict[str, str] = ...) -> None: ...
     @property
