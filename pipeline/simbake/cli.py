@@ -22,7 +22,7 @@ import math
 import sys
 from pathlib import Path
 
-from . import __version__
+from .version import __version__
 from .errors import SceneError, SimulationError
 from .files import check_input_file, check_output_path
 
@@ -68,7 +68,7 @@ def _print_scene_warnings(scene) -> None:
 def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
           shot: str | None = None, instancing: str = "auto", clips: int | None = None,
           threads: int = 0) -> int:
-    from .scene import load_scene
+    from .loading import load_scene
 
     scene = load_scene(scene_path)  # bad input is reported before pxr and the core load
     _print_scene_warnings(scene)

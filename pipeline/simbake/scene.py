@@ -19,7 +19,7 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
 The full reference, with defaults, is the section "Scene file (TOML), version 1" of
 DESIGN.md; the defaults here are the dataclass defaults below.
 
-:func:`load_scene` checks everything that can be checked without reading a mesh: unknown
+:func:`load_toml_scene` checks everything that can be checked without reading a mesh: unknown
 keys at every level, types, ranges, NaN and infinity, vector lengths, names (valid USD
 prim names, unique across bodies and cloths, never ``World``), references (mesh files
 must exist and be files). Loading the meshes themselves is ``assets.py``'s job. Type
@@ -45,7 +45,8 @@ from typing import Any, Callable, Iterable, Optional
 from .errors import SceneError
 from .limits import check_scene
 
-__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_scene"]
+__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_toml_scene", "read_scene_data",
+           "scene_from_data"]
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -240,17 +241,10 @@ TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KE
               "cloths": _CLOTH_KEYS, "bodies.shape": _ANY_SHAPE_KEYS, "cloths.grid": _GRID_KEYS}
 
 
-USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
-
-
-def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Read and validate a scene file (TOML, or a USD shot: .usd, .usda, .usdc); raise
-    :class:`SceneError` on any problem."""
+def load_toml_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read and validate a TOML scene file; raise :class:`SceneError` on any problem.
+    (simbake.load_scene takes a USD shot too: simbake.loading.)"""
     file = os.fspath(path)  # named in messages exactly as the user gave it
-    if Path(file).suffix.lower() in USD_SCENE_SUFFIXES:
-        from .usd_scene import load_shot  # pxr is loaded only for USD shots
-
-        return load_shot(path)
     return scene_from_data(read_scene_data(file), file)
 
 
@@ -269,7 +263,7 @@ def read_scene_data(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene:
     """Validate parsed TOML tables as the scene file at `path` would be (paths relative to it,
-    messages naming it): what load_scene does after reading. A wedge edits the tables of a
+    messages naming it): what load_toml_scene does after reading. A wedge edits the tables of a
     scene file and validates each take's through here (simbake.wedge_takes)."""
     file = os.fspath(path)
     scene_path = _scene_path(file)

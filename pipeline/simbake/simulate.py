@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import _core, __version__
+from . import _core
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
@@ -26,6 +26,7 @@ from .qa_motion import MotionFigures, bounding_radius, lumped_masses, mean_edge
 from .scene import Scene
 from .usd_instancer import quaternion_rate
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
+from .version import __version__
 
 USD_SUFFIXES = (".usdc", ".usda", ".usd")
 INSTANCING_MODES = ("auto", "always", "never")

@@ -43,7 +43,8 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from .errors import SceneError
-from .scene import TABLE_KEYS, USD_SCENE_SUFFIXES, Scene, read_scene_data, scene_from_data
+from .loading import is_usd_scene, load_scene
+from .scene import TABLE_KEYS, Scene, read_scene_data, scene_from_data
 
 POSITION_JITTER = 1e-3              # m: a seed's largest horizontal offset along x and along z
 YAW_JITTER = math.radians(0.5)      # rad: a seed's largest turn about the vertical
@@ -230,7 +231,7 @@ def toml_scene(scene_file: str, settings: Iterable[tuple[str, Any]]) -> Scene:
 # --------------------------------------------------------------------------------------
 
 def is_shot(scene_file: str) -> bool:
-    return Path(scene_file).suffix.lower() in USD_SCENE_SUFFIXES
+    return is_usd_scene(scene_file)
 
 
 def _split_attribute(key: str, file: str) -> tuple[str, str]:
@@ -386,8 +387,6 @@ def check_keys(scene_file: str, keys: Sequence[str]) -> dict[str, str]:
 def take_scene(scene_file: str, take: Take, folder: Path, types: Mapping[str, str]) -> Scene:
     """The validated scene of `take` (a shot's take loads its override layer, written into
     `folder` as TAKE.over.usda); SceneError names the key of a bad value."""
-    from .scene import load_scene
-
     if is_shot(scene_file):
         override = write_override_layer(Path(folder) / f"{take.name}.over.usda", scene_file,
                                         take.settings, types)

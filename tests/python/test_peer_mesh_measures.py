@@ -122,7 +122,7 @@ def test_mass_properties_match_the_core():
 
 def test_mesh_pile_is_the_pipelines_scene():
     pytest.importorskip("simbake")
-    from simbake.scene import load_scene
+    from simbake import load_scene
 
     scene = scenes.build("pile_meshes")
     sim = load_scene(ROOT / scenes.MESH_PILE)
