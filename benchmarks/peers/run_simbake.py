@@ -25,15 +25,12 @@ import hashlib
 import json
 import math
 import os
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import scenes  # noqa: E402
-
-import simbake  # noqa: E402
-from simbake import _core  # noqa: E402
+import simbake
+from benchmarks.peers import scenes
+from simbake import _core
 
 BOX_SUBDIVISIONS = 4
 SPHERE_SUBDIVISIONS = 8

@@ -5,15 +5,14 @@ own scene loader and mass properties."""
 
 import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from benchmarks.peers import scenes
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks" / "peers"))
-import scenes  # noqa: E402
 
 
 def _generate():
