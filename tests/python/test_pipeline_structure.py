@@ -6,7 +6,11 @@
   ``x._y``): a helper two modules share lives in one module under a public name. The compiled
   extension ``simbake._core`` is private to the package, not to a module: every module may
   import it;
-- no function longer than 100 lines.
+- no function longer than 100 lines;
+- tests and benchmarks share code through modules they import normally (the package
+  `benchmarks`, simbake itself), never by putting another folder on `sys.path`: a test edits
+  no `sys.path`, and a benchmark script only adds its own folder (a peer engine's Python,
+  Blender's for one, does not put a script's folder on its path).
 
 The modules are read as source with `ast`, never imported. Each check runs first on a small
 package written here with the fault in it, so a checker that finds nothing cannot pass.
@@ -182,3 +186,47 @@ def test_no_module_uses_another_modules_private_names():
 
 def test_no_pipeline_function_is_over_100_lines():
     assert long_functions(REPO / "pipeline") == []
+
+
+# how a script names its own folder
+OWN_FOLDER = {"os.path.dirname(os.path.abspath(__file__))", "str(Path(__file__).resolve().parent)", "str(HERE)"}
+
+
+def path_edits(folder: Path, pattern: str) -> list[str]:
+    """Every sys.path.insert / append / extend / assignment in the files `pattern` below
+    `folder` that adds anything but the file's own folder (`HERE` must be that folder too)."""
+    found = []
+    for path in sorted(folder.glob(pattern)):
+        tree = ast.parse(path.read_text(), str(path))
+        here = [ast.unparse(n.value) for n in ast.walk(tree) if isinstance(n, ast.Assign)
+                and any(isinstance(t, ast.Name) and t.id == "HERE" for t in n.targets)]
+        own = OWN_FOLDER if here in ([], ["Path(__file__).resolve().parent"]) else OWN_FOLDER - {"str(HERE)"}
+        edits = []
+        for node in ast.walk(tree):
+            target = None
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+                if ast.unparse(node.func.value) == "sys.path" and node.func.attr in ("insert", "append", "extend"):
+                    target = ast.unparse(node.args[-1]) if node.args else ""
+            elif isinstance(node, (ast.Assign, ast.AugAssign)):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                if any(ast.unparse(t).startswith("sys.path") for t in targets):
+                    target = ast.unparse(node.value)
+            if target is not None and target not in own:
+                edits.append((node.lineno, target))
+        found += [f"{path.relative_to(folder)}:{line}: {target}" for line, target in sorted(edits)]
+    return found
+
+
+def test_the_path_check_finds_other_folders(tmp_path):
+    (tmp_path / "own.py").write_text("import os, sys\nsys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))\n")
+    (tmp_path / "here.py").write_text("import sys\nfrom pathlib import Path\nHERE = Path(__file__).resolve().parent\n"
+                                      "sys.path.insert(0, str(HERE))\n")
+    (tmp_path / "up.py").write_text("import sys\nfrom pathlib import Path\nHERE = Path(__file__).resolve().parents[1]\n"
+                                    "sys.path.insert(0, str(HERE))\nsys.path += ['x']\n")
+    assert path_edits(tmp_path, "*.py") == ["up.py:4: str(HERE)", "up.py:5: ['x']"]
+    assert path_edits(tmp_path, "own.py") == []
+
+
+def test_tests_and_benchmarks_put_no_other_folder_on_sys_path():
+    assert path_edits(REPO / "tests" / "python", "*.py") == []
+    assert path_edits(REPO / "benchmarks", "**/*.py") == []
