@@ -35,7 +35,8 @@ from typing import Any, Callable, Mapping, Sequence
 from .errors import OutputError, SceneError, SimulationError
 from .farm import DEFAULT_RETRIES, check_options, dask_client, run_tasks
 from .files import check_output_path, is_stale_temp, is_temp, temp_path
-from .wedge_takes import Take, TakeResult, check_keys, is_shot, perturbable, plan_takes, take_scene
+from .loading import is_usd_scene
+from .wedge_takes import Take, TakeResult, check_keys, perturbable, plan_takes, take_scene
 
 WEDGE_SUFFIXES = (".usda", ".usdc", ".usd")
 MANIFEST = "wedge.json"
@@ -86,7 +87,7 @@ def bake_take(scene_file: str, take: Take, folder: str, threads: int, types: Map
     result = TakeResult(name=take.name, label=take.label(), seed=take.seed, settings=dict(take.settings),
                         worker=_worker_name())
     cache = folder / f"{take.name}.usdc"
-    shot = folder / f"{take.name}.shot.usda" if is_shot(scene_file) else None
+    shot = folder / f"{take.name}.shot.usda" if is_usd_scene(scene_file) else None
     try:
         with _quiet():
             scene = take_scene(scene_file, take, folder, types)
@@ -310,7 +311,7 @@ def wedge(scene, variations: Mapping[str, Sequence[Any]], client=None, *, output
 def batch_output(scene_file: str, folder: Path) -> Path:
     """Where a batch writes a scene's cache: SCENE.usdc, a USD shot's SHOT.cache.usdc."""
     stem = Path(scene_file).stem
-    return Path(folder) / (f"{stem}.cache.usdc" if is_shot(scene_file) else f"{stem}.usdc")
+    return Path(folder) / (f"{stem}.cache.usdc" if is_usd_scene(scene_file) else f"{stem}.usdc")
 
 
 def _check_batch(scene_files: Sequence[str], folder: Path) -> list[Path]:

@@ -230,10 +230,6 @@ def toml_scene(scene_file: str, settings: Iterable[tuple[str, Any]]) -> Scene:
 # Attributes of USD shots
 # --------------------------------------------------------------------------------------
 
-def is_shot(scene_file: str) -> bool:
-    return is_usd_scene(scene_file)
-
-
 def _split_attribute(key: str, file: str) -> tuple[str, str]:
     from pxr import Sdf
 
@@ -376,7 +372,7 @@ def perturbable(scene: Scene) -> bool:
 def check_keys(scene_file: str, keys: Sequence[str]) -> dict[str, str]:
     """Refuse, before any bake, a key that names nothing in the scene (exit 2). Returns the
     USD attribute types of a shot's keys (empty for a TOML scene)."""
-    if is_shot(scene_file):
+    if is_usd_scene(scene_file):
         return usd_attribute_types(scene_file, keys)
     data = copy.deepcopy(read_scene_data(scene_file))
     for key in keys:
@@ -387,7 +383,7 @@ def check_keys(scene_file: str, keys: Sequence[str]) -> dict[str, str]:
 def take_scene(scene_file: str, take: Take, folder: Path, types: Mapping[str, str]) -> Scene:
     """The validated scene of `take` (a shot's take loads its override layer, written into
     `folder` as TAKE.over.usda); SceneError names the key of a bad value."""
-    if is_shot(scene_file):
+    if is_usd_scene(scene_file):
         override = write_override_layer(Path(folder) / f"{take.name}.over.usda", scene_file,
                                         take.settings, types)
         scene = load_scene(override)
