@@ -54,10 +54,14 @@ $(VENV)/.build-requires: | build/.system-packages
 	$(PY) -m pip install -q $(BUILD_REQUIRES)
 	touch $@
 
-# The package, editable: Python changes need no reinstall; C++ changes rebuild incrementally
+# The package, editable: Python changes need no reinstall; C++ changes rebuild incrementally.
+# The checkout's root goes on the environment's path (a .pth file, as an editable install of a
+# flat project writes), so that benchmark scripts in one folder import another folder's shared
+# modules as the package `benchmarks` (benchmarks/__init__.py)
 $(VENV)/.installed: $(VENV)/.build-requires $(SOURCES)
 	$(PY) -m pip install -q --no-build-isolation -e '.[test,preview,wedge]' \
 	  -Cbuild-dir=$(BUILD) -Ccmake.define.SIMBAKE_BUILD_TESTS=ON
+	$(PY) -c 'import pathlib, sysconfig; pathlib.Path(sysconfig.get_path("purelib"), "simbake-checkout.pth").write_text("$(CURDIR)\n")'
 	touch $@
 
 clean:

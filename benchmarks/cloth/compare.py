@@ -48,20 +48,7 @@ PEERS = HERE.parent / "peers"
 RESULTS = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(HERE))
 import drape_spec as spec  # noqa: E402
-
-
-def _peers_compare():
-    # the rigid-body peer driver's helpers (environment, machine, git state, pinning)
-    import importlib.util
-    loader = importlib.util.spec_from_file_location("peers_compare", PEERS / "compare.py")
-    module = importlib.util.module_from_spec(loader)
-    loader.loader.exec_module(module)
-    return module
-
-
-_peers = _peers_compare()
-child_environment, git_state, machine_info, pinned_cpu = (
-    _peers.child_environment, _peers.git_state, _peers.machine_info, _peers.pinned_cpu)
+from benchmarks.peers import compare as peer_driver  # noqa: E402  (pinned runs, machine, git state)
 
 ENGINES = {
     "simbake": (ROOT / ".venv" / "bin" / "python", HERE / "run_simbake.py"),
@@ -108,7 +95,7 @@ def run_once(engine: str, n: int, extra: list, timeout: float) -> dict:
     python, script = ENGINES[engine]
     if not python.exists():
         return {"error": f"{python} not found (see benchmarks/peers/README.md)"}
-    return _peers.run_pinned([str(python), str(script), str(n), *extra], timeout)
+    return peer_driver.run_pinned([str(python), str(script), str(n), *extra], timeout)
 
 
 # ---- measures
@@ -313,7 +300,7 @@ def main() -> None:
             runs[key] = out
             runs_file(engine).write_text(json.dumps({k: r for k, r in runs.items() if r["engine_name"] == engine}))
             print(out.get("error") or f"{cpu_per_sim_second(out):.3g} CPU s/s, strain {out['max_strain']:.3f}")
-    payload = {"machine": machine_info(), "git": git_state(), "rows": summarize(runs)}
+    payload = {"machine": peer_driver.machine_info(), "git": peer_driver.git_state(), "rows": summarize(runs)}
     (RESULTS / "cloth.json").write_text(json.dumps(payload, indent=1))
     write_markdown(payload, RESULTS / "cloth.md")
     write_plots(payload)

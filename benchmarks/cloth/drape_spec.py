@@ -25,7 +25,10 @@ import json
 import resource
 import numpy as np
 
-from crossings import crossing_count
+if __package__:  # imported as benchmarks.cloth.drape_spec (simbake's own benchmarks)
+    from .crossings import crossing_count
+else:            # beside a peer engine's runner, which runs as a file in that engine's Python
+    from crossings import crossing_count
 
 SIZE = 2.0                    # cloth side (m)
 HEIGHT = 1.2                  # cloth plane's height (m), centred over the sphere

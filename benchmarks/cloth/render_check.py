@@ -1,6 +1,7 @@
-"""The render-ready checks of tests/python/test_cloth_render_ready.py on any scene: bakes it and,
-at every frame, counts layers through layers, strain past the limit + 1%, cloth edges
-deeper than 0.5 mm in a body, and body edges through the cloth (boxes and mesh bodies).
+"""The render-ready checks (render_ready.py; tests/python/test_cloth_render_ready.py runs them on
+every shipped cloth scene) on any scene: bakes it and, at every frame, counts layers through
+layers, strain past the limit + 1%, cloth edges deeper than 0.5 mm in a body, and body edges
+through the cloth (boxes and mesh bodies).
 
     .venv/bin/python benchmarks/cloth/render_check.py SCENE.toml [-o CACHE.usdc]
 
@@ -16,11 +17,8 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "tests" / "python"))
-from test_cloth_render_ready import MESSAGES, render_ready_failures  # noqa: E402
-
-import simbake  # noqa: E402
+import simbake
+from benchmarks.cloth.render_ready import MESSAGES, render_ready_failures
 
 
 def main() -> int:

@@ -11,7 +11,7 @@ Boxes: LevelSet.box and box_mesh(size, 4) samples; spheres: LevelSet.sphere and
 sphere_mesh(r, 8) samples (as the pipeline's primitives). Only World.step_frame is timed.
 
 pile_meshes (assets/scenes/pile.toml): the world is built by the pipeline itself, exactly as
-`simbake bake assets/scenes/pile.toml` builds it (simbake.scene.load_scene, simbake.assets.
+`simbake bake assets/scenes/pile.toml` builds it (simbake.load_scene, simbake.assets.
 load_assets: each mesh's level set at its automatic voxel size, its surface samples and its
 mass properties; simbake.simulate.build_world), with threads=1, stepped with the scene's
 [solver] substeps (0: automatic) as the bake does. The script checks that the pipeline's
@@ -25,15 +25,12 @@ import hashlib
 import json
 import math
 import os
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import scenes  # noqa: E402
-
-import simbake  # noqa: E402
-from simbake import _core  # noqa: E402
+import simbake
+from benchmarks.peers import scenes
+from simbake import _core
 
 BOX_SUBDIVISIONS = 4
 SPHERE_SUBDIVISIONS = 8
@@ -68,7 +65,7 @@ def pipeline_world(scene: scenes.Scene):
     """The world `simbake bake` builds for the scene file (one thread), and the file's
     [solver] substeps; checks that the file is the benchmark's scene."""
     from simbake.assets import load_assets
-    from simbake.scene import load_scene
+    from simbake import load_scene
     from simbake.simulate import build_world as bake_world
 
     sim = load_scene(scenes.ROOT / scenes.MESH_PILE)

@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -25,11 +24,9 @@ from pathlib import Path
 os.environ.setdefault("LP_NUM_THREADS", "1")  # before Mesa loads
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
 
-import common  # noqa: E402
-
-import simbake  # noqa: E402
+import simbake  # noqa: E402  (after LP_NUM_THREADS)
+from benchmarks import common  # noqa: E402
 from simbake.preview import Preview  # noqa: E402
 
 SCENES = ["demo", "pile", "drape"]

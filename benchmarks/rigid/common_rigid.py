@@ -37,16 +37,10 @@ RIGID_DIR = Path(__file__).resolve().parent
 BENCH_DIR = RIGID_DIR.parent
 REPO = BENCH_DIR.parent
 SCENES_DIR = REPO / "assets" / "scenes"
-PEERS_DIR = BENCH_DIR / "peers"
 
-for _path in (str(BENCH_DIR), str(PEERS_DIR)):
-    if _path not in sys.path:
-        sys.path.insert(0, _path)
-
-import common  # noqa: E402  (benchmarks/common.py)
-
-import simbake  # noqa: E402
-from simbake import _core, assets as sb_assets, simulate as sb_simulate  # noqa: E402
+import simbake
+from benchmarks import common
+from simbake import _core, assets as sb_assets, simulate as sb_simulate
 
 THREADS = 1  # single-thread figures unless a benchmark says otherwise
 

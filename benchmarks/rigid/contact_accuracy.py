@@ -34,7 +34,7 @@ import numpy as np
 
 import common_rigid as cr
 from common_rigid import _core, common
-from common import AUTOMATIC, FPS, Result, Series
+from benchmarks.common import AUTOMATIC, FPS, Result, Series
 
 NAME = "rigid_contact_accuracy"
 SUBSTEPS = [1, 2, 4, 8, 16, 32]

@@ -38,10 +38,10 @@ import numpy as np
 
 import common_rigid as cr
 from common_rigid import _core, common
-from common import Result, Series
+from benchmarks.common import Result, Series
 
-import run_simbake                   # benchmarks/peers/run_simbake.py: how it samples a box
-import scenes as peer_scenes         # benchmarks/peers/scenes.py: the 1000-box pile
+from benchmarks.peers import run_simbake  # benchmarks/peers/run_simbake.py: how it samples a box
+from benchmarks.peers import scenes as peer_scenes  # benchmarks/peers/scenes.py: the 1000-box pile
 
 NAME = "rigid_piles"
 SCENES = ["pile", "box1000"]

@@ -34,7 +34,7 @@ import numpy as np
 
 import common_rigid as cr
 from common_rigid import _core, common, sb_assets
-from common import Result, Series
+from benchmarks.common import Result, Series
 
 NAME = "rigid_ring_toss"
 VOXEL_SIZES = [0.04, 0.02, 0.01, 0.005]

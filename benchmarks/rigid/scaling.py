@@ -30,10 +30,10 @@ import numpy as np
 
 import common_rigid as cr
 from common_rigid import common
-from common import Result, Series
+from benchmarks.common import Result, Series
 
-import run_simbake                   # benchmarks/peers/run_simbake.py: the scene's world
-import scenes as peer_scenes         # benchmarks/peers/scenes.py: the piles and the measures
+from benchmarks.peers import run_simbake  # benchmarks/peers/run_simbake.py: the scene's world
+from benchmarks.peers import scenes as peer_scenes  # benchmarks/peers/scenes.py: the piles and the measures
 
 NAME = "rigid_scaling"
 SCENES = ["pile", "pile4000", "pile10000"]

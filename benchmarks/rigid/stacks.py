@@ -20,7 +20,7 @@ import numpy as np
 
 import common_rigid as cr
 from common_rigid import common
-from common import Result, Series
+from benchmarks.common import Result, Series
 
 NAME = "rigid_stacks"
 SECONDS = 10.0

@@ -42,7 +42,6 @@ import argparse
 import json
 import math
 import multiprocessing as mp
-import sys
 import time
 from pathlib import Path
 
@@ -50,9 +49,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "benchmarks" / "results"
-sys.path.insert(0, str(ROOT / "benchmarks" / "cloth"))
-import drape_spec as spec  # noqa: E402
-from crossings import crossing_count, segments_through  # noqa: E402
+from benchmarks.cloth import drape_spec as spec
+from benchmarks.cloth.crossings import crossing_count, segments_through
 
 FPS = 24
 TIMEOUT = 120.0

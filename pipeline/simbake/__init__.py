@@ -9,13 +9,14 @@
 from __future__ import annotations
 
 from .errors import SceneError, SimulationError
-from .scene import Scene, load_scene
+from .loading import load_scene
+from .scene import Scene
+from .version import __version__
 
 from .usd_schema import register as _register_usd_schemas
 
 _register_usd_schemas()  # SimbakeClothAPI, before any stage is opened (see usd_schema.py)
 
-__version__ = "0.1.0"
 __all__ = ["Scene", "SceneError", "SimulationError", "bake", "batch", "load_scene", "wedge", "__version__"]
 
 

@@ -23,7 +23,7 @@ import math
 import sys
 from pathlib import Path
 
-from . import __version__
+from .version import __version__
 from .errors import SceneError, SimulationError
 from .files import check_input_file, check_output_path
 
@@ -69,7 +69,7 @@ def _print_scene_warnings(scene) -> None:
 def _bake(scene_path: str, output: str | None, quiet: bool, preview: bool = False,
           shot: str | None = None, instancing: str = "auto", clips: int | None = None,
           threads: int = 0, frames: str | None = None) -> int:
-    from .scene import load_scene
+    from .loading import load_scene
 
     start, end = parse_frames(scene_path, frames) if frames is not None else (None, None)
     scene = load_scene(scene_path, start_frame=start, end_frame=end)  # before the core loads

@@ -29,7 +29,7 @@ import secrets
 import shutil
 import stat
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Collection, Iterable
 
 from .errors import OutputError, SceneError
 
@@ -55,6 +55,19 @@ def _alive(pid: int) -> bool:
     except (PermissionError, OverflowError):
         return True  # another user's process (or a pid we cannot ask about): leave it
     return True
+
+
+def is_temp(name: str) -> bool:
+    """Whether a file or folder name is one of temp_path's temps, or an earlier output moved
+    aside while a bake's outputs were swapped in."""
+    return _TEMP.fullmatch(name) is not None
+
+
+def is_stale_temp(name: str, of: Collection[str]) -> bool:
+    """Whether a file or folder name is a temp of an output named in `of` (a name, not a path)
+    left by a process that is gone."""
+    match = _TEMP.fullmatch(name)
+    return bool(match) and match["name"] in of and not _alive(int(match["pid"]))
 
 
 def remove_stale_temps(path: Path) -> list[Path]:

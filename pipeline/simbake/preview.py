@@ -759,7 +759,8 @@ class Renderer:
 # frames
 
 
-def _font(size: int):
+def label_font(size: int):
+    """Pillow's default font at `size` pixels (a fixed bitmap font before Pillow 10.1)."""
     from PIL import ImageFont
 
     try:
@@ -775,7 +776,7 @@ def burn_in(image: np.ndarray, text: str) -> np.ndarray:
     picture = Image.fromarray(image)
     draw = ImageDraw.Draw(picture)
     size = max(10, image.shape[0] // 22)
-    font = _font(size)
+    font = label_font(size)
     pad = max(3, size // 3)
     left, top, right, bottom = draw.textbbox((2 * pad, 2 * pad), text, font=font)
     draw.rectangle((left - pad, top - pad, right + pad, bottom + pad), fill=(24, 24, 28))
@@ -882,7 +883,7 @@ def write_preview(cache: str | Path, output: str | Path | None = None, *, frames
     try:
         if sheet:
             images = [image for _, image in preview.frames(chosen)]
-            write_atomically(out, lambda tmp: _save_png(tmp, contact_sheet(images)))
+            write_atomically(out, lambda tmp: save_png(tmp, contact_sheet(images)))
         else:
             step = chosen[1] - chosen[0] if len(chosen) > 1 else 1
             write_atomically(out, lambda tmp: _save_movie(tmp, preview.frames(chosen), preview.fps / step))
@@ -891,7 +892,8 @@ def write_preview(cache: str | Path, output: str | Path | None = None, *, frames
     return out, len(chosen)
 
 
-def _save_png(path: str, image: np.ndarray) -> None:
+def save_png(path: str, image: np.ndarray) -> None:
+    """An RGB image (h, w, 3) uint8 as an optimized PNG."""
     from PIL import Image
 
     Image.fromarray(image).save(path, format="PNG", optimize=True)

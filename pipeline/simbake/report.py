@@ -274,8 +274,8 @@ def _html(cache: Path, qa: dict[str, Any], png: bytes) -> str:
                f'<p class="bad">{len(warnings)} warning(s)</p><ul>'
                + "".join(f"<li>{e(w)}</li>" for w in warnings) + "</ul>")
     rows = "".join(
-        f"<tr><td>{e(name)}</td><td>{e(_value(name, s['worst']))}</td><td>{s['frame']}</td>"
-        f"<td>{e(_value(name, s['threshold'])) if s['threshold'] is not None else ''}</td>"
+        f"<tr><td>{e(name)}</td><td>{e(format_figure(name, s['worst']))}</td><td>{s['frame']}</td>"
+        f"<td>{e(format_figure(name, s['threshold'])) if s['threshold'] is not None else ''}</td>"
         f"<td>{s['first_over'] if s['first_over'] is not None else ''}</td></tr>"
         for name, s in qa["summary"].items())
     settings = "".join(f"<li>{e(line)}</li>" for line in _settings_lines(qa))
@@ -296,7 +296,8 @@ cloth {CLOTH_PENETRATION * 1e3:g} mm past a surface, strain limit + {STRAIN_MARG
 """
 
 
-def _value(name: str, value: float) -> str:
+def format_figure(name: str, value: float) -> str:
+    """A QA figure's value with its unit (mm, %, J, s) as the report pages show it."""
     if "penetration" in name:
         return f"{value * 1e3:.3g} mm"
     if "strain" in name:

@@ -19,7 +19,7 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
 The full reference, with defaults, is the section "Scene file (TOML), version 1" of
 DESIGN.md; the defaults here are the dataclass defaults below.
 
-:func:`load_scene` checks everything that can be checked without reading a mesh: unknown
+:func:`load_toml_scene` checks everything that can be checked without reading a mesh: unknown
 keys at every level, types, ranges, NaN and infinity, vector lengths, names (valid USD
 prim names, unique across bodies and cloths, never ``World``), references (mesh files
 must exist and be files). Loading the meshes themselves is ``assets.py``'s job. Type
@@ -45,7 +45,8 @@ from typing import Any, Callable, Iterable, Optional
 from .errors import SceneError
 from .limits import check_scene
 
-__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_scene"]
+__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_toml_scene", "read_scene_data",
+           "scene_from_data"]
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -243,23 +244,11 @@ TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KE
               "cloths": _CLOTH_KEYS, "bodies.shape": _ANY_SHAPE_KEYS, "cloths.grid": _GRID_KEYS}
 
 
-USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
-
-
-def load_scene(path: str | os.PathLike[str], *, start_frame: int | None = None,
-               end_frame: int | None = None) -> Scene:
-    """Read and validate a scene file (TOML, or a USD shot: .usd, .usda, .usdc); raise
-    :class:`SceneError` on any problem. `start_frame`/`end_frame` (``--frames``) override the
-    file's own range; a USD stage without startTimeCode/endTimeCode needs both."""
+def load_toml_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read and validate a TOML scene file; raise :class:`SceneError` on any problem.
+    (simbake.load_scene takes a USD shot too: simbake.loading.)"""
     file = os.fspath(path)  # named in messages exactly as the user gave it
-    frames = frame_range(file, start_frame, end_frame)
-    if Path(file).suffix.lower() in USD_SCENE_SUFFIXES:
-        from .usd_scene import load_shot  # pxr is loaded only for USD shots
-
-        if frames is not None and None in frames:  # one end given: the other is the stage's
-            frames = _stage_range(load_shot(path, None), frames)
-        return load_shot(path, frames)
-    return with_frames(scene_from_data(read_scene_data(file), file), start_frame, end_frame)
+    return scene_from_data(read_scene_data(file), file)
 
 
 def frame_range(file: str, start_frame, end_frame) -> tuple | None:
@@ -274,34 +263,13 @@ def frame_range(file: str, start_frame, end_frame) -> tuple | None:
     return (start_frame, end_frame)
 
 
-def _stage_range(scene: Scene, frames: tuple) -> tuple[int, int]:
+def stage_range(scene: Scene, frames: tuple) -> tuple[int, int]:
+    """`frames` (start, end; either may be None: the scene's own) as a whole range, checked."""
     start = scene.start_frame if frames[0] is None else frames[0]
     end = scene.end_frame if frames[1] is None else frames[1]
     if end < start:
         raise _error(scene.source, "--frames", f"END must be >= START, got {start}:{end}")
     return (start, end)
-
-
-def with_frames(scene: Scene, start_frame: int | None = None, end_frame: int | None = None) -> Scene:
-    """The scene baked over another range (``--frames``): the initial state is written at the
-    new start. A USD shot is read again at that range (its kinematic animation and initial
-    poses are the stage's at those time codes); a TOML scene's keys stay seconds after the
-    (new) start frame."""
-    frames = frame_range(scene.source or str(scene.path), start_frame, end_frame)
-    if frames is None:
-        return scene
-    frames = _stage_range(scene, frames)
-    if frames == (scene.start_frame, scene.end_frame):
-        return scene
-    if scene.shot is not None:
-        from .usd_scene import load_shot
-
-        return load_shot(scene.source or scene.shot.path, frames)
-    from dataclasses import replace
-
-    ranged = replace(scene, start_frame=frames[0], end_frame=frames[1])
-    check_scene(ranged)
-    return ranged
 
 
 def _scene_path(file: str) -> Path:
@@ -319,7 +287,7 @@ def read_scene_data(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene:
     """Validate parsed TOML tables as the scene file at `path` would be (paths relative to it,
-    messages naming it): what load_scene does after reading. A wedge edits the tables of a
+    messages naming it): what load_toml_scene does after reading. A wedge edits the tables of a
     scene file and validates each take's through here (simbake.wedge_takes)."""
     file = os.fspath(path)
     scene_path = _scene_path(file)

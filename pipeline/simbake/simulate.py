@@ -14,18 +14,20 @@ from typing import Callable
 
 import numpy as np
 
-from . import _core, __version__
+from . import _core
 from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
 from .outputs import Outputs, check_outputs
+from .loading import with_frames
 from .limits import check_budget, check_memory_in_flight, check_scene, crowding
 from .normals import corner_normals
 from .qa import QualityRecorder, qa_path
 from .qa_motion import MotionFigures, bounding_radius, lumped_masses, mean_edge
-from .scene import Scene, with_frames
+from .scene import Scene
 from .usd_instancer import quaternion_rate
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
+from .version import __version__
 
 USD_SUFFIXES = (".usdc", ".usda", ".usd")
 INSTANCING_MODES = ("auto", "always", "never")
@@ -351,7 +353,7 @@ def bake(scene: Scene, output: str | Path, *,
 
     `start_frame`/`end_frame` (``--frames``) bake another range than the scene's own: the
     initial state is written at the new start (a USD shot is read again at that range, see
-    simbake.scene.with_frames).
+    simbake.loading.with_frames).
 
     on_frame(done, total) is called after each written frame (for progress bars). With `qa`
     (the default) every written frame's quality figures are measured (simbake.qa) and written

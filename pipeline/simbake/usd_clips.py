@@ -26,7 +26,8 @@ from typing import Any, Mapping, Sequence
 from pxr import Sdf, UsdUtils, Vt
 
 from .outputs import Outputs, check_outputs
-from .usd_writer import CacheWriter, StreamingWriter, _merge, _to_usd, one_thread
+from .usd_values import merge_into, to_usd
+from .usd_writer import CacheWriter, StreamingWriter, one_thread
 
 __all__ = ["ClipsWriter"]
 
@@ -80,7 +81,7 @@ class ClipsWriter(StreamingWriter):
                 self._writer.write_frame(frame, *args, **kwargs)
 
     def add_layer_data(self, data: Mapping[str, Any]) -> None:
-        _merge(self._layer_data, dict(data))
+        merge_into(self._layer_data, dict(data))
 
     # -- finishing ----------------------------------------------------------------------------
 
@@ -141,8 +142,8 @@ class ClipsWriter(StreamingWriter):
         layer.timeCodesPerSecond = layer.framesPerSecond = self._fps
         layer.startTimeCode, layer.endTimeCode = float(self.start_frame), float(self.end_frame)
         layer.defaultPrim = "World"
-        data = _to_usd(self._provenance, "customLayerData")
-        _merge(data, _to_usd(self._layer_data, "customLayerData"))
+        data = to_usd(self._provenance, "customLayerData")
+        merge_into(data, to_usd(self._layer_data, "customLayerData"))
         layer.customLayerData = data
         layer.subLayerPaths.append(f"{folder}/topology.usdc")
         self._set_clips(layer, "/World", "manifest.usda")
@@ -203,8 +204,8 @@ class ShotClipsWriter(ClipsWriter):
 
         layer = Sdf.Layer.CreateAnonymous(".usda")
         copy_stage_metadata(layer, self._scene.shot)
-        data = _to_usd(self._provenance, "customLayerData")
-        _merge(data, _to_usd(self._layer_data, "customLayerData"))
+        data = to_usd(self._provenance, "customLayerData")
+        merge_into(data, to_usd(self._layer_data, "customLayerData"))
         layer.customLayerData = data
         layer.subLayerPaths.append(f"./{self.folder.name}/topology.usdc")
         for root, manifest in self._roots:

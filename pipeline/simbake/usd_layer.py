@@ -40,8 +40,9 @@ import numpy as np
 from pxr import Gf, Sdf, Vt
 
 from .errors import SceneError, SimulationError
-from .files import write_atomically
-from .usd_writer import FORMATS, StreamingWriter, _to_usd, _merge, _remove
+from .files import remove_if_present, write_atomically
+from .usd_values import merge_into, to_usd
+from .usd_writer import FORMATS, StreamingWriter
 
 __all__ = ["ShotLayerWriter", "write_shot_stage"]
 
@@ -136,7 +137,7 @@ class ShotLayerWriter(StreamingWriter):
     def _define(self, layer: Sdf.Layer, provenance: Mapping[str, Any]) -> None:
         shot = self.shot
         copy_stage_metadata(layer, shot)
-        layer.customLayerData = _to_usd(dict(provenance), "customLayerData")
+        layer.customLayerData = to_usd(dict(provenance), "customLayerData")
 
         # instances above simulated prims become ordinary prims here: composition ignores
         # opinions on instance proxies, so the overs below would show nothing
@@ -360,7 +361,7 @@ class ShotLayerWriter(StreamingWriter):
 
     def add_layer_data(self, data: Mapping[str, Any]) -> None:
         merged = dict(self._layer.customLayerData)
-        _merge(merged, _to_usd(dict(data), "customLayerData"))
+        merge_into(merged, to_usd(dict(data), "customLayerData"))
         self._layer.customLayerData = merged
 
     # -- finishing ----------------------------------------------------------------------------
@@ -375,7 +376,7 @@ class ShotLayerWriter(StreamingWriter):
         self._layer = None
         for p in (self._tmp, self._tmp_text):
             if p is not None:
-                _remove(p)
+                remove_if_present(p)
 
 
 # --------------------------------------------------------------------------------------------

@@ -38,9 +38,8 @@ from .limits import INERTIA_TOLERANCE, MAX_FRAMES, check_scene
 from .usd_writer import one_thread
 from .usd_diagnostics import clean, error_texts, location, shown_path, syntax_message, trapped
 
-__all__ = ["ShotInfo", "ShotBody", "ShotCloth", "load_shot", "USD_SCENE_SUFFIXES"]
+__all__ = ["ShotInfo", "ShotBody", "ShotCloth", "load_shot"]
 
-USD_SCENE_SUFFIXES = (".usd", ".usda", ".usdc")
 CLOTH_API = "SimbakeClothAPI"
 _Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # stage Z-up -> Y-up
 _SQRT_HALF = math.sqrt(0.5)

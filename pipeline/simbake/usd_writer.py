@@ -65,8 +65,9 @@ import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
 
 from .errors import SimulationError
-from .files import commit, remove_if_present as _remove, remove_stale_temps
+from .files import commit, remove_if_present, remove_stale_temps
 from .usd_instancer import InstancerGroup
+from .usd_values import merge_into, to_usd
 
 __all__ = ["BodyPrim", "ClothPrim", "CacheWriter", "FORMATS", "InstancerGroup"]
 
@@ -188,48 +189,6 @@ class ClothPrim:
 # helpers
 # --------------------------------------------------------------------------------------------
 
-def _to_usd(value: Any, where: str) -> Any:
-    """Convert a provenance value to something a USD dictionary stores faithfully."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if isinstance(value, bool) or isinstance(value, str):
-        return value
-    if isinstance(value, int):
-        return value if -2**63 <= value < 2**63 else str(value)
-    if isinstance(value, float):
-        return value
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    if isinstance(value, Mapping):
-        return {str(k): _to_usd(v, f"{where}.{k}") for k, v in value.items() if v is not None}
-    if isinstance(value, (list, tuple)):
-        items = [v.item() if isinstance(v, np.generic) else v for v in value]
-        if all(isinstance(v, str) for v in items):
-            return Vt.StringArray(items)
-        if all(isinstance(v, bool) for v in items):
-            return Vt.BoolArray(items)
-        if all(isinstance(v, int) and not isinstance(v, bool) for v in items):
-            if all(-2**63 <= v < 2**63 for v in items):
-                return Vt.Int64Array(items)
-        elif all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in items):
-            return Vt.DoubleArray([float(v) for v in items])
-        # mixed or nested lists: a dictionary keyed by position keeps every value readable
-        return {f"{i:04d}": _to_usd(v, f"{where}[{i}]")
-                for i, v in enumerate(items) if v is not None}
-    raise TypeError(f"provenance {where}: cannot store a {type(value).__name__} in USD")
-
-
-def _merge(into: dict, data: Mapping) -> None:
-    for key, value in data.items():
-        if isinstance(value, Mapping) and isinstance(into.get(key), Mapping):
-            into[key] = dict(into[key])
-            _merge(into[key], value)
-        else:
-            into[key] = value
-
-
 def _extent(points32: np.ndarray) -> Vt.Vec3fArray:
     if points32.shape[0] == 0:
         return Vt.Vec3fArray.FromNumpy(np.zeros((2, 3), np.float32))
@@ -272,7 +231,7 @@ def one_thread():
 
 def _cleanup(paths: list[Path]) -> None:  # weakref.finalize callback: must not reference self
     for p in paths:
-        _remove(p)
+        remove_if_present(p)
 
 
 _counter = itertools.count()
@@ -340,7 +299,7 @@ class StreamingWriter:
         else:  # one of a bake's outputs: renamed into place with the others (simbake.outputs)
             outputs.stage(Path(final), Path(self.path))
         if final != self._tmp:
-            _remove(self._tmp)
+            remove_if_present(self._tmp)
 
 
 
@@ -402,7 +361,7 @@ class CacheWriter(StreamingWriter):
             raise ValueError(f"duplicate prim names: {', '.join(dup)}")
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")
-        provenance_usd = _to_usd(dict(provenance), "customLayerData")
+        provenance_usd = to_usd(dict(provenance), "customLayerData")
 
         self.fps = fps
         self.start_frame, self.end_frame = start_frame, end_frame
@@ -678,7 +637,7 @@ class CacheWriter(StreamingWriter):
         if self._done or self._layer is None:
             raise RuntimeError(f"{self.path}: writer is already closed")
         merged = dict(self._layer.customLayerData)
-        _merge(merged, _to_usd(dict(data), "customLayerData"))
+        merge_into(merged, to_usd(dict(data), "customLayerData"))
         self._layer.customLayerData = merged
 
     # -- finishing ----------------------------------------------------------------------------

@@ -39,9 +39,9 @@ def _band(text: str, width: int, color: tuple[int, int, int]) -> np.ndarray:
     """A strip of `width` pixels with `text` in white on `color`."""
     from PIL import Image, ImageDraw
 
-    from .preview import _font
+    from .preview import label_font
 
-    font = _font(15)
+    font = label_font(15)
     height = 26
     picture = Image.new("RGB", (width, height), color)
     ImageDraw.Draw(picture).text((8, 5), text, font=font, fill=(255, 255, 255))
@@ -91,7 +91,7 @@ def write_wedge_sheet(path: str | Path, output: str | Path | None = None, *, fra
                       size: tuple[int, int] | None = None) -> tuple[Path, int]:
     """Renders the wedge stage `path` as a contact sheet (.png, default OUT.png beside it);
     returns the sheet's path and the number of takes (rows)."""
-    from .preview import Preview, _save_png, parse_frames
+    from .preview import Preview, parse_frames, save_png
 
     path = Path(path)
     out = Path(output) if output is not None else path.with_suffix(".png")
@@ -105,5 +105,5 @@ def write_wedge_sheet(path: str | Path, output: str | Path | None = None, *, fra
     finally:
         preview.close()
     sheet = np.vstack([np.pad(r, ((0, GAP), (0, 0), (0, 0)), constant_values=255) for r in rows])
-    write_atomically(out, lambda tmp: _save_png(tmp, sheet))
+    write_atomically(out, lambda tmp: save_png(tmp, sheet))
     return out, len(rows)

@@ -15,7 +15,7 @@ from typing import Any
 
 from .errors import SceneError
 from .files import check_output_path, write_atomically
-from .report import BAD_COLOR, OK_COLOR, _value
+from .report import BAD_COLOR, OK_COLOR, format_figure
 from .wedge_stage import WedgeStage, read_wedge_stage
 from .wedge_takes import TakeResult
 
@@ -54,7 +54,7 @@ def _row(take: TakeResult) -> dict[str, Any]:
                 "figures": {}}
     warnings = qa.get("warnings", [])
     summary = qa.get("summary", {})
-    figures = {name: (_value(name, s["worst"]), s.get("first_over") is not None)
+    figures = {name: (format_figure(name, s["worst"]), s.get("first_over") is not None)
                for name, s in summary.items() if name in FIGURES}
     return {"verdict": "clean" if not warnings else f"{len(warnings)} QA warning(s): " + "; ".join(warnings),
             "bad": bool(warnings), "figures": figures, "frames": len(qa.get("frames", [])),

@@ -25,7 +25,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import secrets
 import shutil
 import socket
 import warnings
@@ -35,8 +34,9 @@ from typing import Any, Callable, Mapping, Sequence
 
 from .errors import OutputError, SceneError, SimulationError
 from .farm import DEFAULT_RETRIES, check_options, dask_client, run_tasks
-from .files import _TEMP, _alive, check_output_path
-from .wedge_takes import Take, TakeResult, check_keys, is_shot, perturbable, plan_takes, take_scene
+from .files import check_output_path, is_stale_temp, is_temp, temp_path
+from .loading import is_usd_scene
+from .wedge_takes import Take, TakeResult, check_keys, perturbable, plan_takes, take_scene
 
 WEDGE_SUFFIXES = (".usda", ".usdc", ".usd")
 MANIFEST = "wedge.json"
@@ -87,7 +87,7 @@ def bake_take(scene_file: str, take: Take, folder: str, threads: int, types: Map
     result = TakeResult(name=take.name, label=take.label(), seed=take.seed, settings=dict(take.settings),
                         worker=_worker_name())
     cache = folder / f"{take.name}.usdc"
-    shot = folder / f"{take.name}.shot.usda" if is_shot(scene_file) else None
+    shot = folder / f"{take.name}.shot.usda" if is_usd_scene(scene_file) else None
     try:
         with _quiet():
             scene = take_scene(scene_file, take, folder, types)
@@ -102,7 +102,7 @@ def bake_take(scene_file: str, take: Take, folder: str, threads: int, types: Map
 
 def bake_scene(scene_file: str, output: str, threads: int) -> TakeResult:
     """One scene of a batch baked to `output` (a Dask task), as `simbake bake` would."""
-    from .scene import load_scene
+    from .loading import load_scene
     from .simulate import bake
 
     result = TakeResult(name=scene_file, label="", worker=_worker_name())
@@ -177,14 +177,13 @@ class Staging:
     def __init__(self, final: Path):
         self.final = Path(final)
         self._remove_stale()
-        self.path = self.final.with_name(f".{self.final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+        self.path = temp_path(self.final, suffix="")
         self.path.mkdir()
 
     def _remove_stale(self) -> None:
         """Staging folders of this output left by wedges that were killed (pid gone)."""
         for entry in self.final.parent.iterdir():
-            match = _TEMP.fullmatch(entry.name)
-            if match and match["name"] == self.final.name and not _alive(int(match["pid"])):
+            if is_stale_temp(entry.name, (self.final.name,)):
                 shutil.rmtree(entry, ignore_errors=True)
 
     def sweep(self) -> list[str]:
@@ -192,7 +191,7 @@ class Staging:
         ended, so nothing is writing here. Returns their names."""
         removed = []
         for entry in self.path.iterdir():
-            if _TEMP.fullmatch(entry.name):
+            if is_temp(entry.name):
                 shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
                 removed.append(entry.name)
         return removed
@@ -202,7 +201,7 @@ class Staging:
         (self.path / MANIFEST).write_text(json.dumps(manifest, indent=1, default=str) + "\n")
         old = None
         if os.path.lexists(self.final):
-            old = self.final.with_name(f".{self.final.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+            old = temp_path(self.final, suffix="")
             os.replace(self.final, old)
         os.replace(self.path, self.final)
         if old is not None:
@@ -259,7 +258,7 @@ def plan_wedge(scene, variations: Mapping[str, Sequence[Any]], output=None, seed
                workers: int | None = None, retries: int = DEFAULT_RETRIES, scheduler: str | None = None) -> WedgePlan:
     """Every check a wedge makes before baking (SceneError, exit 2): the scene, the keys, the
     takes, the outputs."""
-    from .scene import load_scene
+    from .loading import load_scene
 
     scene_file = _scene_file(scene)
     base = load_scene(scene_file)
@@ -312,7 +311,7 @@ def wedge(scene, variations: Mapping[str, Sequence[Any]], client=None, *, output
 def batch_output(scene_file: str, folder: Path) -> Path:
     """Where a batch writes a scene's cache: SCENE.usdc, a USD shot's SHOT.cache.usdc."""
     stem = Path(scene_file).stem
-    return Path(folder) / (f"{stem}.cache.usdc" if is_shot(scene_file) else f"{stem}.usdc")
+    return Path(folder) / (f"{stem}.cache.usdc" if is_usd_scene(scene_file) else f"{stem}.usdc")
 
 
 def _check_batch(scene_files: Sequence[str], folder: Path) -> list[Path]:
@@ -337,8 +336,7 @@ def _remove_batch_temps(outputs: Sequence[Path]) -> None:
     for out in outputs:
         names = {out.name, qa_path(out).name, f"{out.stem}.vdb"}
         for entry in out.parent.iterdir():
-            match = _TEMP.fullmatch(entry.name)
-            if match and match["name"] in names and not _alive(int(match["pid"])):
+            if is_stale_temp(entry.name, names):
                 shutil.rmtree(entry, ignore_errors=True) if entry.is_dir() else entry.unlink(missing_ok=True)
 
 

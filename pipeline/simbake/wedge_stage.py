@@ -70,16 +70,16 @@ def _metadata(layer, stages: Sequence[Path]) -> str:
 
 def _usd_value(value: Any) -> Any:
     """A setting as a USD dictionary holds it; what it cannot (a TOML date) as its text."""
-    from .usd_writer import _to_usd
+    from .usd_values import to_usd
 
     try:
-        return _to_usd(value, "settings")
+        return to_usd(value, "settings")
     except TypeError:
         return format_value(value)
 
 
 def _take_data(record: TakeResult, folder: Path) -> dict:
-    from .usd_writer import _to_usd
+    from .usd_values import to_usd
 
     data = {"take": record.name, "label": record.label, "seed": record.seed, **record.figures}
     if record.stage is not None:
@@ -88,7 +88,7 @@ def _take_data(record: TakeResult, folder: Path) -> dict:
         data["qa"] = _relative(record.qa, folder)
     if record.error is not None:
         data["error"] = record.error
-    data = _to_usd(data, "customData")
+    data = to_usd(data, "customData")
     data["settings"] = {key: _usd_value(value) for key, value in record.settings.items()}
     return data
 
@@ -98,7 +98,7 @@ def write_wedge_stage(out: Path, scene: str, keys: Sequence[str], seeds: int,
     """Writes OUT (.usda, or .usdc) beside and renames it; needs at least one baked take."""
     from pxr import Sdf
 
-    from .usd_writer import _to_usd
+    from .usd_values import to_usd
 
     out = Path(out)
     baked = [r for r in records if r.error is None]
@@ -115,8 +115,8 @@ def write_wedge_stage(out: Path, scene: str, keys: Sequence[str], seeds: int,
     prim.variantSelections[VARIANT_SET] = baked[0].name
     failed = {r.name: _take_data(r, out.parent) for r in records if r.error is not None}
     layer.customLayerData = {"simbake": {"wedge": {
-        "scene": scene, "keys": _to_usd(list(keys), "keys"), "seeds": seeds,
-        "takes": _to_usd([r.name for r in records], "takes"), "default": baked[0].name, "failed": failed}}}
+        "scene": scene, "keys": to_usd(list(keys), "keys"), "seeds": seeds,
+        "takes": to_usd([r.name for r in records], "takes"), "default": baked[0].name, "failed": failed}}}
     fmt = "usdc" if out.suffix.lower() in (".usdc", ".usd") else "usda"
 
     def export(tmp: str) -> None:

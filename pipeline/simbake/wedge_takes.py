@@ -43,7 +43,8 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from .errors import SceneError
-from .scene import TABLE_KEYS, USD_SCENE_SUFFIXES, Scene, read_scene_data, scene_from_data
+from .loading import is_usd_scene, load_scene
+from .scene import TABLE_KEYS, Scene, read_scene_data, scene_from_data
 
 POSITION_JITTER = 1e-3              # m: a seed's largest horizontal offset along x and along z
 YAW_JITTER = math.radians(0.5)      # rad: a seed's largest turn about the vertical
@@ -229,10 +230,6 @@ def toml_scene(scene_file: str, settings: Iterable[tuple[str, Any]]) -> Scene:
 # Attributes of USD shots
 # --------------------------------------------------------------------------------------
 
-def is_shot(scene_file: str) -> bool:
-    return Path(scene_file).suffix.lower() in USD_SCENE_SUFFIXES
-
-
 def _split_attribute(key: str, file: str) -> tuple[str, str]:
     from pxr import Sdf
 
@@ -375,7 +372,7 @@ def perturbable(scene: Scene) -> bool:
 def check_keys(scene_file: str, keys: Sequence[str]) -> dict[str, str]:
     """Refuse, before any bake, a key that names nothing in the scene (exit 2). Returns the
     USD attribute types of a shot's keys (empty for a TOML scene)."""
-    if is_shot(scene_file):
+    if is_usd_scene(scene_file):
         return usd_attribute_types(scene_file, keys)
     data = copy.deepcopy(read_scene_data(scene_file))
     for key in keys:
@@ -386,9 +383,7 @@ def check_keys(scene_file: str, keys: Sequence[str]) -> dict[str, str]:
 def take_scene(scene_file: str, take: Take, folder: Path, types: Mapping[str, str]) -> Scene:
     """The validated scene of `take` (a shot's take loads its override layer, written into
     `folder` as TAKE.over.usda); SceneError names the key of a bad value."""
-    from .scene import load_scene
-
-    if is_shot(scene_file):
+    if is_usd_scene(scene_file):
         override = write_override_layer(Path(folder) / f"{take.name}.over.usda", scene_file,
                                         take.settings, types)
         scene = load_scene(override)

@@ -27,9 +27,8 @@ from simbake.assets import load_assets, load_cloth
 from simbake.qa import load_qa
 from simbake.simulate import build_world
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "benchmarks" / "stress"))
-from cloth_press import press_scene  # noqa: E402
+from benchmarks.stress.cloth_press import press_scene
+
 
 RESOLUTION = 16
 # per frame, the candidate pairs found by the self-collision searches, per cloth step and

@@ -15,7 +15,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
+
+from benchmarks.memory.cloth_peak import RUN
 
 SCENE = """[scene]
 end_frame = 13
@@ -30,9 +31,6 @@ pinned = [0, 159, 25440, 25599]
 
 
 def test_a_cloth_bakes_within_its_memory_estimate(tmp_path):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "memory"))
-    from cloth_peak import RUN
-
     (tmp_path / "sheet.toml").write_text(SCENE)
     result = subprocess.run([sys.executable, "-c", RUN, str(tmp_path / "sheet.toml"), str(tmp_path / "sheet.usdc")],
                             capture_output=True, text=True, timeout=600)

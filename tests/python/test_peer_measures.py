@@ -3,14 +3,11 @@ penetration is read from its poses by this code, so it is checked here against a
 worked out by hand and against brute force."""
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "peers"))
-import scenes  # noqa: E402
+from benchmarks.peers import scenes
 
 
 def rotation_y(angle):

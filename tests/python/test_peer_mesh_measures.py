@@ -5,15 +5,14 @@ own scene loader and mass properties."""
 
 import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from benchmarks.peers import scenes
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks" / "peers"))
-import scenes  # noqa: E402
 
 
 def _generate():
@@ -122,7 +121,7 @@ def test_mass_properties_match_the_core():
 
 def test_mesh_pile_is_the_pipelines_scene():
     pytest.importorskip("simbake")
-    from simbake.scene import load_scene
+    from simbake import load_scene
 
     scene = scenes.build("pile_meshes")
     sim = load_scene(ROOT / scenes.MESH_PILE)

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from simbake.errors import SceneError
-from simbake.scene import Body, Cloth, Ground, Scene, Shape, load_scene
+from simbake import load_scene
+from simbake.scene import Body, Cloth, Ground, Scene, Shape
 
 # A tetrahedron: small, closed, enough for "the mesh file exists".
 TETRA_OBJ = """\

@@ -27,10 +27,9 @@ from pathlib import Path
 import pytest
 
 import simbake
+from simbake.cache_compare import first_difference
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "benchmarks"))
-from same_bits import first_difference  # noqa: E402  (caches compared by content)
 
 SIMBAKE = str(Path(sys.executable).with_name("simbake"))
 DASK = str(Path(sys.executable).with_name("dask"))

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from simbake.errors import SceneError
-from simbake.scene import load_scene
+from simbake import load_scene
 from simbake.wedge_takes import (POSITION_JITTER, YAW_JITTER, Take, check_keys, parse_set, perturb, plan_takes,
                                  take_scene, toml_scene)
 

@@ -1,0 +1,2 @@
+"""Rigid bodies against peer engines: the scenes and measures (scenes.py) every runner, the
+rigid benchmarks and the tests share."""
