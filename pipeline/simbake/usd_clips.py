@@ -92,10 +92,19 @@ class ClipsWriter(StreamingWriter):
             if self._writer is not None or not self._clips or self._clips[-1][2] != self.end_frame:
                 raise RuntimeError(f"{self.path}: frames missing; nothing saved")
             files = [str(self._tmp / name) for name, _, _ in self._clips]
-            topology = Sdf.Layer.CreateNew(str(self._tmp / "topology.usdc"))
-            with one_thread():  # stitching is a parallel reduction: its order set the bytes
-                UsdUtils.StitchClipsTopology(topology, files)
-                topology.Save()
+            # stitching is a parallel reduction whose order sets the layer's internal order, and
+            # with it the .usdc bytes (the same content): stitched on one thread into a scratch
+            # layer, then parsed from its text (one fixed order) and exported as the topology
+            scratch = self._tmp / ".stitched.usdc"
+            with one_thread():
+                stitched = Sdf.Layer.CreateNew(str(scratch))
+                UsdUtils.StitchClipsTopology(stitched, files)
+                parsed = Sdf.Layer.CreateAnonymous(".usda")
+                parsed.ImportFromString(stitched.ExportToString())
+                del stitched
+                scratch.unlink()
+                parsed.Export(str(self._tmp / "topology.usdc"))
+                topology = Sdf.Layer.FindOrOpen(str(self._tmp / "topology.usdc"))
                 for root, name in self._clip_roots():
                     manifest = Sdf.Layer.CreateNew(str(self._tmp / name))
                     UsdUtils.StitchClipsManifest(manifest, topology, files, Sdf.Path(root))

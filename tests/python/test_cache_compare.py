@@ -63,9 +63,9 @@ def test_changed_fields_specs_and_layer_data_are_found(cache, tmp_path):
     from pxr import Sdf
 
     def extent(layer):
-        layer.GetAttributeAtPath("/World/ball/mesh.extent").default = [(-1, -1, -1), (1, 1, 1)]
+        layer.GetAttributeAtPath("/World/ball/ball.extent").default = [(-1, -1, -1), (1, 1, 1)]
 
-    assert first_difference(cache, _edited(cache, tmp_path, extent)) == "/World/ball/mesh.extent: field default differs"
+    assert first_difference(cache, _edited(cache, tmp_path, extent)) == "/World/ball/ball.extent: field default differs"
 
     def extra_prim(layer):
         Sdf.CreatePrimInLayer(layer, "/World/extra")
