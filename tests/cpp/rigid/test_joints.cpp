@@ -375,3 +375,81 @@ TEST(Joints, SameBitsOnAnyThreadCount) {
   }
   EXPECT_EQ(runs[0], runs[1]);
 }
+
+// A velocity drive (large damping, no stiffness) turns a rod hanging off-centre from its hinge
+// against gravity's torque: its speed stays within 1% of the target over whole turns; force
+// and acceleration drives
+TEST(Joints, DriveHoldsTargetVelocity) {
+  for (bool acceleration : {false, true}) {
+    World world;
+    world.add_body(rod(1.0, 1.0, 0.0));
+    JointDesc j = hinge_to_world(0, 1.0, 0.0);
+    JointDrive& drive = j.drives[kRotX + 2];  // (the hinge's axis, Z)
+    drive.enabled = true;
+    drive.damping = acceleration ? 1e5 : 1e4;  // (gravity's torque at most m g d = 4.9 N m)
+    drive.target_velocity = 2.0;
+    drive.acceleration = acceleration;
+    world.add_joint(j);
+    double worst = 0.0;
+    for (int k = 0; k < 240 * 6; ++k) {
+      world.step(1.0 / 240.0);
+      const double w = angular_velocity(world.body_def(0), world.body_state(0)).z();
+      if (k >= 240) worst = std::max(worst, std::abs(w / 2.0 - 1.0));
+    }
+    EXPECT_LT(worst, 0.01);
+    std::printf("velocity drive (%s): speed within %.4f%% of the target over 5 s\n",
+                acceleration ? "acceleration" : "force", 100.0 * worst);
+  }
+}
+
+// A position drive holds a rod where its spring balances gravity's torque: the angle theta
+// with ks (theta* - theta) = m g d sin(theta), solved here by bisection
+TEST(Joints, PositionDriveBalancesGravity) {
+  const double ks = 20.0, target = 60.0 * M_PI / 180.0, mgd = 1.0 * kG * 0.5;
+  double lo = 0.0, hi = target;
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (ks * (target - mid) > mgd * std::sin(mid) ? lo : hi) = mid;
+  }
+  World world;
+  world.add_body(rod(1.0, 1.0, 0.0));
+  JointDesc j = hinge_to_world(0, 1.0, 0.0);
+  j.drives[kRotZ] = JointDrive{true, ks, 5.0, target, 0.0, kUnlimited, false};
+  world.add_joint(j);
+  for (int k = 0; k < 240 * 20; ++k) world.step(1.0 / 240.0);
+  EXPECT_NEAR(rod_angle(world, 0) / lo, 1.0, 1e-3);
+  std::printf("position drive: rests at %.5f deg (balance %.5f deg)\n", degrees(rod_angle(world, 0)), degrees(lo));
+}
+
+// A 2 kg block hanging from the world by a fixed joint carries m g = 19.62 N: a break force
+// 5% above holds for 3 s, 5% below breaks in the first step, for good; a torque likewise
+TEST(Joints, BreaksPastItsForceOnly) {
+  const double weight = 2.0 * kG;
+  for (double factor : {1.05, 0.95}) {
+    for (bool torque : {false, true}) {
+      World world;
+      world.add_body(box_body(Vec3(0.2, 0.2, 0.2), 2.0, Vec3(0.0, -0.5, 0.0)));
+      JointDesc j;
+      j.type = JointType::kFixed;
+      j.body1 = 0;
+      j.local_position0 = Vec3(torque ? 0.5 : 0.0, 0.0, 0.0);  // (off to the side: a torque of m g 0.5)
+      j.local_position1 = Vec3(torque ? 0.5 : 0.0, 0.5, 0.0);
+      (torque ? j.break_torque : j.break_force) = factor * weight * (torque ? 0.5 : 1.0);
+      world.add_joint(j);
+      int broke = -1;
+      for (int k = 0; k < 720; ++k) {
+        world.step(1.0 / 240.0);
+        if (broke < 0 && !world.joint_state().enabled[0]) broke = k;
+      }
+      if (factor > 1.0) {
+        EXPECT_EQ(broke, -1) << "torque " << torque;
+        EXPECT_NEAR(world.joint_state().force[0].y(), weight, 1e-6 * weight);
+        EXPECT_LT(world.body_state(0).v.norm(), 1e-9);
+      } else {
+        EXPECT_EQ(broke, 0) << "torque " << torque;
+        EXPECT_NEAR(world.joint_state().broke_at[0], 1.0 / 240.0, 1e-12);
+        EXPECT_NEAR(world.body_state(0).v.y(), -kG * 3.0, 0.05);  // (then falls freely)
+      }
+    }
+  }
+}
