@@ -34,8 +34,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 namespace simbake {
 
@@ -44,7 +42,7 @@ namespace {
 constexpr int kIterations = 16;         // Newton iterations per step, at most
 constexpr double kTolerance = 1e-10;    // (m, rad) error at which a step's solve stops early
 constexpr double kDivergence = 1e-6;    // (m, rad) an error this small never counts as diverging
-constexpr double kRegularization = 1e-9;  // relative to A's diagonal: redundant rows stay solvable
+constexpr double kRegularization = 1e-5;  // relative to A's diagonal: redundant rows stay solvable
 
 bool dynamic_body(const RigidModel& model, int i) { return i != kWorldBody && !model.defs[i].kinematic; }
 
@@ -267,7 +265,7 @@ struct ComponentSolver {
   }
 
   // A dlambda = residual over the active rows, solved and applied within the rows' bounds
-  void solve() {
+  void solve(bool first) {
     const int m = static_cast<int>(c.active.size());
     c.step.assign(c.rows.size(), 0.0);
     if (m == 0) return;
@@ -282,7 +280,11 @@ struct ComponentSolver {
     // A = J_end M^-1 J_start^T: how each row's coordinate at the end of the step moves with
     // each row's impulse (not symmetric once the bodies turn in the step; with a mass ratio
     // of 1000 the light bodies' turn matters even when it is small), summed over the bodies
-    // two rows share, with the drives' compliance and a little regularization on the diagonal
+    // two rows share, with the drives' compliance and a little regularization on the diagonal.
+    // The first iteration, which finds nearly all of the impulse, takes the symmetric J_start
+    // M^-1 J_start^T: where joints close loops (a glued wall) the rows are redundant, and the
+    // regularized symmetric system gives the impulses of least norm instead of arbitrary
+    // self-cancelling ones, so that what each joint carries (its break test) is meaningful
     std::vector<Eigen::Triplet<double>> entries;
     for (int k = 0; k < m; ++k) {
       const JointRow& row = c.rows[c.active[k]];
@@ -290,7 +292,7 @@ struct ComponentSolver {
     }
     for (int i = 0; i < static_cast<int>(c.body_rows.size()); ++i) {
       for (int r : c.body_rows[i]) {
-        JointRow moved = c.measured[r];
+        JointRow moved = first ? c.rows[r] : c.measured[r];
         moved.side[0] = c.rows[r].side[0];
         moved.side[1] = c.rows[r].side[1];
         for (int s : c.body_rows[i]) entries.emplace_back(slot[r], slot[s], coupling_at(moved, c.rows[s], i));
@@ -350,7 +352,6 @@ void solve_joints(const RigidModel& model, RigidData& data, JointScratch& js, do
     for (int iteration = 0; iteration <= kIterations; ++iteration) {
       solver.predict();
       const double worst = solver.gather(iteration == 0);
-      if (std::getenv("SIMBAKE_JOINT_DEBUG")) std::fprintf(stderr, "  it %d worst %.3e\n", iteration, worst);
       if (worst < best) {
         best = worst;
         alpha = 1.0;
@@ -363,11 +364,10 @@ void solve_joints(const RigidModel& model, RigidData& data, JointScratch& js, do
         continue;
       }
       if ((worst <= kTolerance && iteration > 0) || iteration == kIterations) break;
-      solver.solve();
+      solver.solve(iteration == 0);
     }
     solver.restore();
     solver.record_loads();
-    if (std::getenv("SIMBAKE_JOINT_DEBUG")) std::fprintf(stderr, "component %d: best %.3e\n", k, best);
   });
   // breaking, in joint order
   for (int k = 0; k < js.count; ++k) {

@@ -358,6 +358,17 @@ class ShotLayerWriter(StreamingWriter):
         if self.flush_every and written % self.flush_every == 0 and self._next_frame <= self.end_frame:
             self._save()
 
+    def write_joint_breaks(self, breaks: Mapping[str, int]) -> None:
+        """Joints that broke (prim path: the first frame it is broken at): ``over`` the joint
+        with ``physics:jointEnabled`` time-sampled true at the start and false from that frame."""
+        for path, frame in sorted(breaks.items()):
+            prim = Sdf.CreatePrimInLayer(self._layer, path)
+            prim.specifier = Sdf.SpecifierOver
+            attr = prim.attributes.get("physics:jointEnabled") or Sdf.AttributeSpec(
+                prim, "physics:jointEnabled", Sdf.ValueTypeNames.Bool)
+            self._layer.SetTimeSample(attr.path, float(self.start_frame), True)
+            self._layer.SetTimeSample(attr.path, float(frame), False)
+
     def add_layer_data(self, data: Mapping[str, Any]) -> None:
         merged = dict(self._layer.customLayerData)
         _merge(merged, _to_usd(dict(data), "customLayerData"))

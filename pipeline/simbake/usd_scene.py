@@ -34,6 +34,7 @@ from .errors import SceneError
 from .scene import (Body, Cloth, Ground, Key, Scene, Shape, DEFAULT_DENSITY, CLOTH_MODELS,
                     COMPRESSION_MODES, CLOTH_INTEGRATORS, RESERVED_NAMES)
 from . import usd_schema
+from .usd_joints import joint_kinds, read_filtering, read_joints
 from .limits import INERTIA_TOLERANCE, MAX_FRAMES, check_scene
 from .usd_writer import one_thread
 from .usd_diagnostics import clean, error_texts, location, shown_path, syntax_message, trapped
@@ -394,13 +395,6 @@ class _Reader:
             if kind not in _SUPPORTED:
                 for p, _ in sorted(entries, key=lambda e: str(e[0])):
                     self.warn_once(str(kind), p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
-        for p, d in sorted(shapes.items()):
-            if d.collisionGroups:
-                self.warn_once("PhysicsCollisionGroup", p, "collision groups are not simulated by simbake; "
-                                                           "the collider collides with everything")
-            if d.filteredCollisions:
-                self.warn_once("physics:filteredPairs", p, "filtered collision pairs are not simulated by "
-                                                           "simbake; the pair collides")
         self.substeps = self._physx()
 
         gravity = self._gravity(descs.get(T.Scene, []))
@@ -433,6 +427,8 @@ class _Reader:
                 bodies.append(self._static_body(p, d, used_names, len(bodies)))
 
         cloths, shot_cloths = self._cloths(used_names)
+        joints = read_joints(self, descs, bodies)
+        filtered_pairs, collision_groups, group_filters = read_filtering(descs, bodies)
         self._named_warnings()
         ranged = ("--frames", "--frames") if self.frames_given else ("startTimeCode", "endTimeCode")
         self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", ranged[0]),
@@ -451,7 +447,9 @@ class _Reader:
         return Scene(path=self.path, source=self.file, fps=self.tcps, substeps=self.substeps,
                      start_frame=int(self.start),
                      end_frame=int(self.end), gravity=gravity, ground=ground, bodies=tuple(bodies),
-                     cloths=tuple(cloths), warnings=tuple(self.warnings), shot=info)
+                     cloths=tuple(cloths), joints=joints, filtered_pairs=filtered_pairs,
+                     collision_groups=collision_groups, group_filters=group_filters,
+                     warnings=tuple(self.warnings), shot=info)
 
     def _dependencies(self) -> tuple[Path, ...]:
         """Every layer and asset the stage names (sublayers, references, payloads, value clips,
@@ -1270,7 +1268,7 @@ def _value_text(value) -> str:
 
 _SUPPORTED_NAMES = ("Scene", "RigidBody", "RigidBodyMaterial", "CubeShape", "SphereShape",
                     "CapsuleShape", "CylinderShape", "MeshShape", "PlaneShape", "Capsule1Shape",
-                    "Cylinder1Shape")
+                    "Cylinder1Shape", *joint_kinds())
 
 
 class _SupportedKinds:

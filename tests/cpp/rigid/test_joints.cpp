@@ -298,13 +298,14 @@ TEST(Joints, FixedPairMovesAsOneBody) {
 // whips at tens of m/s): every joint within 1 mm at every frame over 10 s
 TEST(Joints, FiftyLinkChainStaysClosed) {
   World world = chain(50, 0.1, 0.1, 0.1);
-  double gap = 0.0;
+  double gap = 0.0, lowest = 0.0;
   for (int f = 0; f < 240; ++f) {
     world.step_frame(1.0 / 24.0);
     gap = std::max(gap, worst_gap(world));
+    lowest = std::min(lowest, world.body_state(49).x.y());
   }
   EXPECT_LT(gap, 1e-3);
-  EXPECT_LT(world.body_state(49).x.y(), -1.0);  // (it fell)
+  EXPECT_LT(lowest, -4.5);  // (it fell and swung through hanging straight)
   std::printf("50-link chain, 10 s at 1/240 s: largest joint gap %.3e m\n", gap);
 }
 
