@@ -177,7 +177,7 @@ def _unique(path: str, used: set[str]) -> str:
     return f"{name}_{n}"
 
 
-def read_filtering(descs: dict, bodies) -> tuple[tuple, tuple, tuple]:
+def read_filtering(descs: dict, bodies, stage) -> tuple[tuple, tuple, tuple]:
     """Filtered pairs (PhysicsFilteredPairsAPI on bodies or colliders) and collision groups
     (PhysicsCollisionGroup: filteredGroups, invertFilteredGroups, mergeGroup) as the scene's
     filtered_pairs, collision_groups and group_filters."""
@@ -202,15 +202,24 @@ def read_filtering(descs: dict, bodies) -> tuple[tuple, tuple, tuple]:
                 groups[str(p)] = d
     if not groups:
         return tuple(sorted(pairs)), (), ()
+    # (invertFilteredGroups and mergeGroup read from the prims: the parser's descriptor can
+    # leave an unauthored invertFilteredGroups uninitialized)
+    from pxr import UsdPhysics
+
+    invert, merge = {}, {}
+    for p in groups:
+        group = UsdPhysics.CollisionGroup(stage.GetPrimAtPath(p))
+        invert[p] = bool(group.GetInvertFilteredGroupsAttr().Get())
+        merge[p] = group.GetMergeGroupNameAttr().Get() or ""
     # merged groups (the same mergeGroup name) are one group
     root = {}
-    for p, d in groups.items():
-        root[p] = next((q for q, e in groups.items() if d.mergeGroupName and e.mergeGroupName == d.mergeGroupName), p)
+    for p in groups:
+        root[p] = next((q for q in groups if merge[p] and merge[q] == merge[p]), p)
     index = {r: k for k, r in enumerate(dict.fromkeys(root[p] for p in groups))}
     filters = [set() for _ in index]
     for p, d in groups.items():
         listed = {index[root[str(q)]] for q in d.filteredGroups if str(q) in root}
-        filters[index[root[p]]] |= (set(index.values()) - listed) if d.invertFilteredGroups else listed
+        filters[index[root[p]]] |= (set(index.values()) - listed) if invert[p] else listed
     members: dict[str, set[int]] = {}
     for p, d in shapes:
         body = _body_of(p, by_path)

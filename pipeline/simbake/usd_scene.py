@@ -428,7 +428,7 @@ class _Reader:
 
         cloths, shot_cloths = self._cloths(used_names)
         joints = read_joints(self, descs, bodies)
-        filtered_pairs, collision_groups, group_filters = read_filtering(descs, bodies)
+        filtered_pairs, collision_groups, group_filters = read_filtering(descs, bodies, self.stage)
         self._named_warnings()
         ranged = ("--frames", "--frames") if self.frames_given else ("startTimeCode", "endTimeCode")
         self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", ranged[0]),
