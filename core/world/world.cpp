@@ -161,6 +161,13 @@ void World::step_bodies(double dt) {
   { StageTimer timer(profile_, Stage::kContacts); resolve_contacts(model, data, scratch, settings_, dt); }
   { StageTimer timer(profile_, Stage::kShockPropagation); propagate_shocks(model, data, scratch, settings_); }
   { StageTimer timer(profile_, Stage::kJoints); solve_joints(model, data, scratch.joints, dt, time_ + dt); }
+  if (!model.joints.empty() && !scratch.contacts.empty()) {
+    // the joints coupled bodies the contacts saw apart (a glued pair landing: the upper one's
+    // momentum now pushes the lower into the ground): contacts once more, then the joints
+    { StageTimer timer(profile_, Stage::kContacts); resolve_contacts(model, data, scratch, settings_, dt); }
+    { StageTimer timer(profile_, Stage::kShockPropagation); propagate_shocks(model, data, scratch, settings_); }
+    { StageTimer timer(profile_, Stage::kJoints); solve_joints(model, data, scratch.joints, dt, time_ + dt); }
+  }
   { StageTimer timer(profile_, Stage::kPositions); update_positions(model, data, scratch, settings_, dt); }
   { StageTimer timer(profile_, Stage::kSleeping); update_sleeping(model, data, scratch, settings_, dt); }
   stats_.impulses += scratch.impulses;
