@@ -132,3 +132,17 @@ def test_wrecking_ball_wall_stands_then_breaks():
         world.step_frame(1 / 24)
         broken_at.append(int((~world.joint_states()["enabled"]).sum()))
     assert broken_at[20] == 0 and broken_at[-1] >= 10
+
+
+def test_same_bits_at_any_thread_count(tmp_path):
+    """The shot with every joint type, baked on one thread and on two: the same cache content."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("same_bits", REPO / "benchmarks" / "same_bits.py")
+    same_bits = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(same_bits)
+    scene = simbake.load_scene(SHOT)
+    for threads in (1, 2):
+        (tmp_path / str(threads)).mkdir()
+        simbake.bake(scene, tmp_path / str(threads) / "joints.usdc", threads=threads, qa=False)
+    assert same_bits.first_difference(tmp_path / "1" / "joints.usdc", tmp_path / "2" / "joints.usdc") is None
