@@ -360,14 +360,15 @@ class ShotLayerWriter(StreamingWriter):
 
     def write_joint_breaks(self, breaks: Mapping[str, int]) -> None:
         """Joints that broke (prim path: the first frame it is broken at): ``over`` the joint
-        with ``physics:jointEnabled`` time-sampled true at the start and false from that frame."""
+        with ``physics:jointEnabled`` time-sampled at every frame: true before that frame, false from it
+        (a sample at every frame, as every other attribute the cache samples)."""
         for path, frame in sorted(breaks.items()):
             prim = Sdf.CreatePrimInLayer(self._layer, path)
             prim.specifier = Sdf.SpecifierOver
             attr = prim.attributes.get("physics:jointEnabled") or Sdf.AttributeSpec(
                 prim, "physics:jointEnabled", Sdf.ValueTypeNames.Bool)
-            self._layer.SetTimeSample(attr.path, float(self.start_frame), True)
-            self._layer.SetTimeSample(attr.path, float(frame), False)
+            for f in range(self.start_frame, self.end_frame + 1):
+                self._layer.SetTimeSample(attr.path, float(f), f < frame)
 
     def add_layer_data(self, data: Mapping[str, Any]) -> None:
         merged = dict(self._layer.customLayerData)

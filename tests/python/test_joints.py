@@ -103,6 +103,9 @@ def test_shot_with_every_joint_type(tmp_path):
     stage = Usd.Stage.Open(str(tmp_path / "shot.sim.usda"))
     enabled = stage.GetPrimAtPath("/World/joints/weak").GetAttribute("physics:jointEnabled")
     assert enabled.Get(1) is True and enabled.Get(2) is False and enabled.Get(48) is False
+    from simbake.cli import main
+
+    assert main(["check", str(tmp_path / "shot.sim.usda")]) == 0  # (a sample at every frame)
     assert stage.GetPrimAtPath("/World/joints/glue").GetAttribute("physics:jointEnabled").Get(48) is True
     qa = json.loads(stats.qa.read_text())
     assert qa["summary"]["joint_error"]["worst"] < 1e-3
