@@ -454,3 +454,45 @@ TEST(Joints, BreaksPastItsForceOnly) {
     }
   }
 }
+
+// A rod on a ball joint with a 30 degree cone (and on a D6 joint whose Y and Z turns are
+// limited to 30 degrees, its twist to 10), knocked sideways hard: it never leaves the cone by
+// more than half a degree, and reaches it; the D6's twist stays within its limit
+TEST(Joints, ConeLimitHolds) {
+  for (bool d6 : {false, true}) {
+    World world;
+    BodyDesc body = rod(1.0, 1.0, 0.0);
+    body.angular_velocity = Vec3(12.0, 3.0, 18.0);
+    world.add_body(body);
+    JointDesc j;
+    j.body1 = 0;
+    j.local_position1 = Vec3(0.0, 0.5, 0.0);
+    // (the cone about the joint frame's X, which both frames turn to the rod's -Y)
+    j.local_rotation0 = j.local_rotation1 = Quat(Eigen::AngleAxisd(-M_PI / 2.0, Vec3::UnitZ()));
+    const double cone = 30.0 * M_PI / 180.0, twist = 10.0 * M_PI / 180.0;
+    if (d6) {
+      j.type = JointType::kD6;
+      for (int k = 0; k < 3; ++k) j.dof_lower[k] = 1.0, j.dof_upper[k] = -1.0;  // translations locked
+      j.dof_lower[kRotX] = -twist;
+      j.dof_upper[kRotX] = twist;
+      for (int k : {kRotY, kRotZ}) j.dof_lower[k] = -cone, j.dof_upper[k] = cone;
+    } else {
+      j.type = JointType::kSpherical;
+      j.cone_angle0 = j.cone_angle1 = cone;
+    }
+    world.add_joint(j);
+    double widest = 0.0, turned = 0.0;
+    for (int k = 0; k < 240 * 4; ++k) {
+      world.step(1.0 / 240.0);
+      const Mat3 r = world.body_mesh_pose(0).rotation;
+      widest = std::max(widest, std::acos(std::clamp((r * Vec3::UnitY()).y(), -1.0, 1.0)));
+      // (the joint's own measure of how far past its limits it is)
+      turned = std::max(turned, std::abs(world.joint_error(0).angle));
+    }
+    EXPECT_LT(widest, cone + 0.5 * M_PI / 180.0) << "d6 " << d6;
+    EXPECT_GT(widest, cone - 0.5 * M_PI / 180.0) << "d6 " << d6;
+    EXPECT_LT(turned, 0.5 * M_PI / 180.0) << "d6 " << d6;
+    std::printf("cone (%s): widest swing %.4f deg (cone 30), largest limit error %.2e deg\n",
+                d6 ? "d6" : "spherical", degrees(widest), degrees(turned));
+  }
+}
