@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -96,6 +97,12 @@ using Names = std::initializer_list<std::pair<const char*, Enum>>;
 const Names<InPlaneModel> kModels = {{"springs", InPlaneModel::kSprings}, {"membrane", InPlaneModel::kMembrane}};
 const Names<CompressionMode> kCompressions = {
     {"subgrid", CompressionMode::kSubgrid}, {"enforce", CompressionMode::kEnforce}, {"none", CompressionMode::kNone}};
+const Names<JointType> kJointTypes = {{"fixed", JointType::kFixed},         {"revolute", JointType::kRevolute},
+                                      {"prismatic", JointType::kPrismatic}, {"spherical", JointType::kSpherical},
+                                      {"distance", JointType::kDistance},   {"d6", JointType::kD6}};
+const Names<int> kAxes = {{"x", 0}, {"y", 1}, {"z", 2}};
+const Names<int> kDofs = {{"trans_x", kTransX}, {"trans_y", kTransY}, {"trans_z", kTransZ},
+                          {"rot_x", kRotX},     {"rot_y", kRotY},     {"rot_z", kRotZ}};
 const Names<ClothIntegrator> kIntegrators = {{"implicit", ClothIntegrator::kImplicit}, {"explicit", ClothIntegrator::kExplicit}};
 const Names<ClothPreconditioner> kPreconditioners = {{"automatic", ClothPreconditioner::kAutomatic},
                                                      {"block_jacobi", ClothPreconditioner::kBlockJacobi},
@@ -447,6 +454,83 @@ py::dict quality_dict(const FrameQuality& q) {
   return d;
 }
 
+// A joint's description and its drives (rigid/joint_model.h)
+void bind_joint_desc(py::module_& m) {
+  py::class_<JointDrive> drive(m, "JointDrive", "A joint drive (rigid/joint_model.h), by keyword");
+  keyword_struct(drive);
+  drive.def_readwrite("stiffness", &JointDrive::stiffness, "(N/m or N m/rad; acceleration drives: 1/s^2)")
+      .def_readwrite("damping", &JointDrive::damping, "(N s/m or N m s/rad; acceleration drives: 1/s)")
+      .def_readwrite("target_position", &JointDrive::target_position, "(m or rad)")
+      .def_readwrite("target_velocity", &JointDrive::target_velocity, "(m/s or rad/s)")
+      .def_readwrite("max_force", &JointDrive::max_force, "(N or N m)")
+      .def_readwrite("acceleration", &JointDrive::acceleration, "false: a force drive");
+  py::class_<JointDesc> joint(m, "JointDesc", "A joint's description (rigid/joint_model.h), by keyword");
+  keyword_struct(joint);
+  enum_field(joint, "type", [](JointDesc& d) -> JointType& { return d.type; }, kJointTypes);
+  joint.def_readwrite("body0", &JointDesc::body0, "body index, or -1: the world")
+      .def_readwrite("body1", &JointDesc::body1, "body index, or -1: the world")
+      .def_readwrite("local_position0", &JointDesc::local_position0, "joint frame in body 0's mesh frame (m)")
+      .def_property("local_rotation0", [](const JointDesc& d) {
+             return Eigen::Vector4d(d.local_rotation0.w(), d.local_rotation0.x(), d.local_rotation0.y(), d.local_rotation0.z());
+           }, [](JointDesc& d, const Eigen::Vector4d& q) { d.local_rotation0 = quat_wxyz(q); }, "[w, x, y, z]")
+      .def_readwrite("local_position1", &JointDesc::local_position1, "joint frame in body 1's mesh frame (m)")
+      .def_property("local_rotation1", [](const JointDesc& d) {
+             return Eigen::Vector4d(d.local_rotation1.w(), d.local_rotation1.x(), d.local_rotation1.y(), d.local_rotation1.z());
+           }, [](JointDesc& d, const Eigen::Vector4d& q) { d.local_rotation1 = quat_wxyz(q); }, "[w, x, y, z]");
+  enum_field(joint, "axis", [](JointDesc& d) -> int& { return d.axis; }, kAxes);
+  joint.def_readwrite("lower_limit", &JointDesc::lower_limit, "revolute (rad), prismatic (m)")
+      .def_readwrite("upper_limit", &JointDesc::upper_limit)
+      .def_readwrite("cone_angle0", &JointDesc::cone_angle0, "spherical (rad)")
+      .def_readwrite("cone_angle1", &JointDesc::cone_angle1)
+      .def_readwrite("min_distance", &JointDesc::min_distance, "distance (m)")
+      .def_readwrite("max_distance", &JointDesc::max_distance)
+      .def_readwrite("dof_lower", &JointDesc::dof_lower, "d6: trans_x .. rot_z (m, rad); lower > upper locks")
+      .def_readwrite("dof_upper", &JointDesc::dof_upper)
+      .def_property("drives", [](const JointDesc& d) {
+             py::dict out;
+             for (const auto& [name, dof] : kDofs) {
+               if (d.drives[dof].enabled) out[name] = d.drives[dof];
+             }
+             return out;
+           }, [](JointDesc& d, const std::map<std::string, JointDrive>& drives) {
+             d.drives = {};
+             for (const auto& [name, drive] : drives) {
+               d.drives[choose(name, kDofs)] = drive;
+               d.drives[choose(name, kDofs)].enabled = true;
+             }
+           }, "{trans_x .. rot_z: JointDrive}")
+      .def_readwrite("break_force", &JointDesc::break_force, "(N)")
+      .def_readwrite("break_torque", &JointDesc::break_torque, "(N m)")
+      .def_readwrite("enabled", &JointDesc::enabled)
+      .def_readwrite("collision_enabled", &JointDesc::collision_enabled);
+}
+
+// The joints' state as arrays: enabled (n,), broke_at (n,) (s, NaN while whole), gap (n,) (m),
+// angle (n,) (rad), force (n, 3) (N), torque (n, 3) (N m)
+py::dict joint_states(const World& w) {
+  const int n = w.joint_count();
+  Eigen::Array<bool, Eigen::Dynamic, 1> enabled(n);
+  Eigen::VectorXd broke(n), gap(n), angle(n);
+  Points force(n, 3), torque(n, 3);
+  for (int j = 0; j < n; ++j) {
+    enabled[j] = w.joint_state().enabled[j] != 0;
+    broke[j] = w.joint_state().broke_at[j];
+    const JointError e = w.joint_error(j);
+    gap[j] = e.gap;
+    angle[j] = e.angle;
+    force.row(j) = w.joint_state().force[j].transpose();
+    torque.row(j) = w.joint_state().torque[j].transpose();
+  }
+  py::dict d;
+  d["enabled"] = enabled;
+  d["broke_at"] = broke;
+  d["gap"] = gap;
+  d["angle"] = angle;
+  d["force"] = force;
+  d["torque"] = torque;
+  return d;
+}
+
 // Building a world: its settings, ground, bodies (and their keys) and cloths
 void bind_world_building(py::class_<World>& world) {
   world
@@ -469,6 +553,18 @@ void bind_world_building(py::class_<World>& world) {
            "add_body(BodyDesc) or add_body(**BodyDesc fields): the body's index. mesh_vertices and "
            "mesh_triangles: the closed mesh a baked level-set shape was made from, whose sharp edges and "
            "corners are then held out of cloth triangles")
+      .def("add_joint", [](World& w, const std::optional<JointDesc>& given, const py::kwargs& kwargs) {
+             const JointDesc desc = given_or_from_keywords(given, kwargs, "desc");
+             for (int body : {desc.body0, desc.body1}) {
+               if (body != kWorldBody) checked_index(body, w.body_count(), "body");
+             }
+             return w.add_joint(desc);
+           }, py::arg("desc") = py::none(), "add_joint(JointDesc) or add_joint(**JointDesc fields): the joint's index")
+      .def("filter_pair", [](World& w, long long a, long long b) {
+             w.filter_pair(checked_index(a, w.body_count(), "body"), checked_index(b, w.body_count(), "body"));
+           }, py::arg("a"), py::arg("b"), "Bodies a and b never collide")
+      .def("set_collision_groups", &World::set_collision_groups, py::arg("members"), py::arg("filters"),
+           "Collision groups: members[g] the bodies of group g, filters[g] the groups it does not collide with")
       .def("add_cloth", [](World& w, const std::optional<ClothDesc>& given, const py::kwargs& kwargs) {
              return w.add_cloth(given_or_from_keywords(given, kwargs, "desc"));
            }, py::arg("desc") = py::none(), "add_cloth(ClothDesc) or add_cloth(**ClothDesc fields): the cloth's index")
@@ -538,6 +634,10 @@ void bind_world_stepping(py::class_<World>& world) {
 void bind_world_reading(py::class_<World>& world) {
   world.def_property_readonly("body_count", &World::body_count)
       .def_property_readonly("cloth_count", &World::cloth_count)
+      .def_property_readonly("joint_count", &World::joint_count)
+      .def("joint_states", &joint_states,
+           "Every joint now: enabled (n,), broke_at (n,) (s, NaN while whole), gap (n,) (m) and angle (n,) "
+           "(rad) between its frames, force (n, 3) (N) and torque (n, 3) (N m) on body 1 over the last step")
       .def_property_readonly("sleeping_count", &World::sleeping_count)
       .def_property_readonly("time", &World::time)
       .def("body_states", &body_states,
@@ -591,6 +691,7 @@ PYBIND11_MODULE(_core, m) {
   bind_settings(m);
   bind_body_desc(m);
   bind_cloth_desc(m);
+  bind_joint_desc(m);
   py::class_<World> world(m, "World");
   bind_world_building(world);
   bind_world_stepping(world);

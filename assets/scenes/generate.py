@@ -203,10 +203,94 @@ def box_plow() -> str:
     return text
 
 
+def joint(name: str, kind: str, body0: str, body1: str, **extra) -> str:
+    lines = [f'\n[[joints]]\nname = "{name}"\ntype = "{kind}"']
+    if body0:
+        lines.append(f'body0 = "{body0}"')
+    lines.append(f'body1 = "{body1}"')
+    for key, value in extra.items():
+        if isinstance(value, str):
+            lines.append(f'{key} = "{value}"')
+        elif isinstance(value, (tuple, list)):
+            lines.append(f"{key} = {vec(value)}")
+        else:
+            lines.append(f"{key} = {value:.6g}")
+    return "\n".join(lines) + "\n"
+
+
+def link_chain(prefix: str, anchor: str, start, count: int, length: float, mass: float, anchor_at) -> str:
+    """`count` box links along +x from `start`, ball joints end to end, the first to `anchor`
+    (its frame point `anchor_at`)."""
+    text = ""
+    for i in range(count):
+        name = f"{prefix}{i:02d}"
+        text += body(name, box((length, 0.05, 0.05)), (start[0] + (i + 0.5) * length, start[1], start[2]), mass=mass)
+        text += joint(f"{name}_joint", "spherical", anchor if i == 0 else f"{prefix}{i - 1:02d}", name,
+                      local_position0=anchor_at if i == 0 else (0.5 * length, 0, 0),
+                      local_position1=(-0.5 * length, 0, 0))
+    return text
+
+
+def chain() -> str:
+    text = header("A chain of 20 links hanging from a beam by one end, released level: it swings down "
+                  "and whips about under the beam (ball joints; links collide with all but their "
+                  "neighbours).", 241)
+    text += body("beam", box((3.0, 0.2, 0.2)), (0, 3.2, 0), kinematic=True)
+    text += link_chain("link", "beam", (-1.0, 3.0, 0), 20, 0.12, 0.3, (-1.0, -0.2, 0))
+    return text
+
+
+def door() -> str:
+    text = header("A door (1 x 2 m, 20 kg) on two hinges to a post, pushed open: it swings to its "
+                  "stop at 100 degrees and rests there.", 121)
+    text += body("post", box((0.1, 2.2, 0.1)), (0, 1.1, 0), kinematic=True)
+    text += body("door", box((1.0, 2.0, 0.04)), (0.55, 1.05, 0), mass=20.0, angular_velocity=(0, 2.5, 0))
+    for name, y in (("hinge_top", 0.8), ("hinge_bottom", -0.8)):
+        text += joint(name, "revolute", "post", "door", axis="y", local_position0=(0.05, y - 0.05, 0),
+                      local_position1=(-0.5, y, 0), lower_limit=0.0, upper_limit=math.radians(100))
+    return text
+
+
+def wrecking_ball() -> str:
+    text = header("A wrecking ball (400 kg) on a chain of six links swings into a wall of 100 bricks, "
+                  "each row glued brick to brick by breakable fixed joints, rows resting on each other "
+                  "in running bond: the glue holds while the wall stands and breaks where the ball hits.", 121)
+    size = (0.4, 0.2, 0.25)
+    for row in range(10):
+        for col in range(10):
+            x = -1.8 + col * size[0] + (0.5 * size[0] if row % 2 else 0.0) - (0.1 if row % 2 else 0.0)
+            text += body(f"brick_{row}_{col}", box(size), (x, 0.1 + row * size[1], 0), density=1800.0)
+    for row in range(10):
+        for col in range(10):
+            name = f"brick_{row}_{col}"
+            glue = dict(break_force=2000.0, break_torque=600.0)
+            if col + 1 < 10:
+                text += joint(f"glue_{row}_{col}_r", "fixed", name, f"brick_{row}_{col + 1}",
+                              local_position0=(0.5 * size[0], 0, 0), local_position1=(-0.5 * size[0], 0, 0), **glue)
+    crane = (0.0, 5.4, -0.55)
+    text += body("crane", box((0.4, 0.4, 0.4)), crane, kinematic=True)
+    length, angle = 0.6, math.radians(60)  # the chain's angle from hanging straight down, away from the wall
+    d = (0.0, -math.cos(angle), -math.sin(angle))
+    top = (crane[0], crane[1] - 0.2, crane[2])
+    turn = (math.cos(0.5 * angle), math.sin(0.5 * angle), 0.0, 0.0)  # the links' -y along d
+    for i in range(6):
+        c = tuple(top[k] + (i + 0.5) * length * d[k] for k in range(3))
+        text += body(f"chain{i}", box((0.08, length, 0.08)), c, mass=10.0, orientation=turn)
+        text += joint(f"chain{i}_joint", "spherical", "crane" if i == 0 else f"chain{i - 1}", f"chain{i}",
+                      local_position0=(0, -0.2, 0) if i == 0 else (0, -0.5 * length, 0),
+                      local_position1=(0, 0.5 * length, 0))
+    ball = tuple(top[k] + (6 * length + 0.4) * d[k] for k in range(3))
+    text += body("ball", 'shape = { type = "sphere", radius = 0.4 }', ball, mass=400.0)
+    text += joint("ball_joint", "spherical", "chain5", "ball", local_position0=(0, -0.5 * length, 0),
+                  local_position1=tuple(-0.4 * v for v in d))
+    return text
+
+
 def main() -> None:
     for name, make in [("heap", heap), ("towel_on_rod", towel_on_rod), ("tower", tower), ("pyramid", pyramid), ("dominoes", dominoes), ("pile", pile),
                        ("ring_toss", ring_toss), ("drape", drape), ("flag", flag), ("tablecloth", tablecloth),
-                       ("cape_on_mover", cape_on_mover), ("cloth_demo", cloth_demo), ("box_plow", box_plow)]:
+                       ("cape_on_mover", cape_on_mover), ("cloth_demo", cloth_demo), ("box_plow", box_plow),
+                       ("chain", chain), ("door", door), ("wrecking_ball", wrecking_ball)]:
         (HERE / f"{name}.toml").write_text(make())
 
 

@@ -14,6 +14,7 @@
 // lets a bouncy ball bounce on a default, non-bouncy ground).
 #include "rigid/broad_phase.h"
 
+#include "rigid/collision_filter.h"
 #include "rigid/sleeping.h"
 
 #include <algorithm>
@@ -107,6 +108,7 @@ void broad_phase(const RigidModel& model, RigidData& data, RigidScratch& scratch
   for (const auto& [a, b] : overlaps) {
     if (model.defs[a].kinematic && model.defs[b].kinematic) continue;
     if (data.asleep[a] || data.asleep[b]) continue;  // asleep, or asleep against a body not touching it
+    if (model.filters_collisions() && collision_filtered(model, data, a, b)) continue;
     scratch.pairs.push_back({a, b, combine_friction(model.defs[a].friction, model.defs[b].friction),
                              combine_restitution(model.defs[a].restitution, model.defs[b].restitution)});
   }

@@ -10,6 +10,14 @@
 
 namespace simbake {
 
+// The joints' state: whether each acts, and what it did over the last step
+struct JointState {
+  std::vector<char> enabled;      // (njoint) acting; a broken joint stays disabled
+  std::vector<double> broke_at;   // (njoint) world time it broke (s); NaN while whole
+  std::vector<Vec3> force;        // (njoint x 3) force on body 1 over the last step, world (N)
+  std::vector<Vec3> torque;       // (njoint x 3) torque of its angular rows on body 1 (N m)
+};
+
 struct RigidData {
   // motion
   std::vector<Vec3> x;          // (nbody x 3) centre of mass, world (m)
@@ -24,6 +32,7 @@ struct RigidData {
   std::vector<Vec3> rest_x;     // (nbody x 3) where the current rest began: centre of mass (m)
   std::vector<Quat> rest_q;     //   and orientation
   std::vector<int> island;      // (nbody) union-find parent; for sleepers, their island
+  JointState joints;            // the joints' state
 };
 
 // Appends body i's state, from its checked description and constant def

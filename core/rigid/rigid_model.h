@@ -6,10 +6,13 @@
 
 #include "geometry/mass_properties.h"
 #include "geometry/mesh.h"
+#include "rigid/joint_model.h"
 #include "rigid/kinematic_track.h"
 #include "rigid/rigid_body.h"
 
+#include <cstdint>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace simbake {
@@ -48,8 +51,16 @@ struct RigidModel {
   std::vector<TriangleMesh> meshes;     // (nbody) the mesh of a level-set body (BodyDesc), else empty
   std::vector<KinematicTrack> tracks;   // (nbody) key tracks of keyed kinematic bodies (else empty)
   std::optional<GroundDef> ground;      // the plane y = height, if any
+  // joints and collision filtering (rigid/joint_model.h, rigid/collision_filter.h)
+  std::vector<JointDef> joints;                    // (njoint) constant definitions
+  std::vector<std::vector<int>> body_joints;       // (nbody) the joints of each body
+  std::vector<std::pair<int, int>> filtered_pairs; // pairs (a < b) that never collide, sorted
+  std::vector<std::uint64_t> groups;               // (nbody) its collision groups (bit g: group g)
+  std::vector<std::uint64_t> group_filters;        // (ngroup) the groups group g does not collide with
 
   int body_count() const { return static_cast<int>(defs.size()); }
+  // whether any pair may be kept from colliding (joints, filtered pairs, groups)
+  bool filters_collisions() const { return !joints.empty() || !filtered_pairs.empty() || !group_filters.empty(); }
 };
 
 // Throws std::invalid_argument naming what is wrong with the ground, or with a body's description
@@ -59,5 +70,8 @@ void check_body(const BodyDesc& desc);
 // The constant description of a checked body: principal axes and moments, bounding radius,
 // thickness, sample blocks
 RigidBodyDef make_body_def(const BodyDesc& desc);
+
+// The constant definition of a checked joint between bodies of the model (rigid/joint_model.h)
+JointDef make_joint_def(const RigidModel& model, const JointDesc& desc);
 
 }  // namespace simbake

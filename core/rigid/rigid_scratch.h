@@ -6,6 +6,7 @@
 
 #include "rigid/contact_points.h"
 #include "rigid/islands.h"
+#include "rigid/joints.h"
 #include "rigid/overlapping_pairs.h"
 #include "rigid/rigid_data.h"
 
@@ -81,6 +82,7 @@ struct RigidScratch {
   IslandScratch islands;                    // this step's islands of the impulse stage under way
   ImpulseLog log;                           // the serial stages' impulses
   ShockScratch shock;                       // reused by propagate_shocks
+  JointScratch joints;                      // the joints stage's components and rows
   std::vector<int> body_scratch;            // (nbody) reused by the stages
   long long impulses = 0;                   // impulses applied since the world last collected them
 };

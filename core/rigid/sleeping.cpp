@@ -1,5 +1,5 @@
 // Sleeping. Bodies are grouped into islands connected through this step's contact points
-// (the ground and kinematic bodies do not connect). A body is at rest while none of its points
+// and their enabled joints (the ground and kinematic bodies do not connect). A body is at rest while none of its points
 // has strayed further than sleep_speed * sleep_time / 2 from where it was when its rest began
 // (so the bottom of a loaded pile, whose velocities flicker at the solver's tolerance without
 // going anywhere, counts as resting). When every body of an island has rested for sleep_time
@@ -43,6 +43,13 @@ void update_sleeping(const RigidModel& model, RigidData& data, const RigidScratc
   for (const ContactPoint& contact : scratch.contacts) {
     const int a = contact.point.a, b = contact.point.b;
     if (contact.apart || b == kGround || model.defs[a].kinematic || model.defs[b].kinematic) continue;
+    const int ra = find(a), rb = find(b);
+    if (ra != rb) data.island[std::max(ra, rb)] = std::min(ra, rb);
+  }
+  // and through the enabled joints between dynamic bodies
+  for (int j = 0; j < static_cast<int>(model.joints.size()); ++j) {
+    const int a = model.joints[j].body0, b = model.joints[j].body1;
+    if (!data.joints.enabled[j] || a < 0 || b < 0 || model.defs[a].kinematic || model.defs[b].kinematic) continue;
     const int ra = find(a), rb = find(b);
     if (ra != rb) data.island[std::max(ra, rb)] = std::min(ra, rb);
   }

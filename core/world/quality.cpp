@@ -2,6 +2,7 @@
 
 #include "geometry/triangle_intersection.h"
 #include "rigid/box_contact.h"
+#include "rigid/collision_filter.h"
 
 #include <algorithm>
 #include <numeric>
@@ -66,6 +67,8 @@ PenetrationFigure body_penetration(const World& w) {
       const int j = order[q];
       if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
       if ((w.rigid_data().x[j] - xi).norm() > ri + w.body_def(j).bounding_radius) continue;
+      // (a pair kept from colliding, jointed or filtered, may overlap)
+      if (w.rigid_model().filters_collisions() && collision_filtered(w.rigid_model(), w.rigid_data(), i, j)) continue;
       // a dynamic body's samples first, so that on a tie it is named as the one inside
       const bool i_first = !w.body_def(i).kinematic;
       samples_inside(w, i_first ? i : j, i_first ? j : i, poses, deepest);

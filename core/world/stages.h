@@ -7,6 +7,7 @@
 //   velocities         gravity                                    rigid/integration.h
 //   contacts           inelastic impulses, average velocities     rigid/contacts.h
 //   shock_propagation  the contact graph level by level           rigid/shock_propagation.h
+//   joints             joints held at the end of the step         rigid/joints.h
 //   positions          x += dt v, torque-free rotation            rigid/integration.h
 //   sleeping           islands at rest put to sleep               rigid/sleeping.h
 //   cloths             every cloth's step, of which:              cloth/cloth_step.h
@@ -30,6 +31,7 @@ enum class Stage : int {
   kVelocities,
   kContacts,
   kShockPropagation,
+  kJoints,
   kPositions,
   kSleeping,
   kCloths,
@@ -45,7 +47,7 @@ inline constexpr int kStageCount = static_cast<int>(Stage::kCount);
 
 // Each stage's name, as the profile reports it (Python's World.profile() keys)
 inline constexpr std::array<const char*, kStageCount> kStageNames = {
-    "kinematic_bodies", "broad_phase", "collisions", "velocities", "contacts", "shock_propagation", "positions",
+    "kinematic_bodies", "broad_phase", "collisions", "velocities", "contacts", "shock_propagation", "joints", "positions",
     "sleeping", "cloths", "cloth_forces", "cloth_contacts", "cloth_strain", "cloth_self_collision", "statistics"};
 static_assert(kStageNames[kStageCount - 1] != nullptr, "a name for every stage");
 

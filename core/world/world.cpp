@@ -3,10 +3,12 @@
 #include "world/world.h"
 
 #include "rigid/broad_phase.h"
+#include "rigid/collision_filter.h"
 #include "rigid/collisions.h"
 #include "rigid/contacts.h"
 #include "rigid/impulse_stage.h"
 #include "rigid/integration.h"
+#include "rigid/joints.h"
 #include "rigid/kinematic_bodies.h"
 #include "rigid/shock_propagation.h"
 #include "rigid/sleeping.h"
@@ -35,9 +37,33 @@ int World::add_body(const BodyDesc& desc) {
   rigid_model_.defs.push_back(make_body_def(desc));
   rigid_model_.meshes.push_back({desc.mesh_vertices, desc.mesh_triangles});
   rigid_model_.tracks.emplace_back();
+  rigid_model_.body_joints.emplace_back();
+  rigid_model_.groups.push_back(0);
   add_body_state(desc, rigid_model_.defs.back(), rigid_data_);
   add_body_scratch(rigid_model_, rigid_data_, rigid_scratch_);
   return body_count() - 1;
+}
+
+int World::add_joint(const JointDesc& desc) {
+  check_joint(desc, body_count());
+  const int j = joint_count();
+  rigid_model_.joints.push_back(make_joint_def(rigid_model_, desc));
+  for (int body : {desc.body0, desc.body1}) {
+    if (body != kWorldBody) rigid_model_.body_joints[body].push_back(j);
+  }
+  JointState& state = rigid_data_.joints;
+  state.enabled.push_back(desc.enabled ? 1 : 0);
+  state.broke_at.push_back(std::nan(""));
+  state.force.push_back(Vec3::Zero());
+  state.torque.push_back(Vec3::Zero());
+  return j;
+}
+
+void World::filter_pair(int a, int b) { add_filtered_pair(rigid_model_, a, b); }
+
+void World::set_collision_groups(const std::vector<std::vector<int>>& members,
+                                 const std::vector<std::vector<int>>& filters) {
+  simbake::set_collision_groups(rigid_model_, members, filters);
 }
 
 int World::add_cloth(const ClothDesc& desc) {
@@ -134,6 +160,14 @@ void World::step_bodies(double dt) {
   { StageTimer timer(profile_, Stage::kVelocities); update_velocities(model, data, settings_, dt); }
   { StageTimer timer(profile_, Stage::kContacts); resolve_contacts(model, data, scratch, settings_, dt); }
   { StageTimer timer(profile_, Stage::kShockPropagation); propagate_shocks(model, data, scratch, settings_); }
+  { StageTimer timer(profile_, Stage::kJoints); solve_joints(model, data, scratch.joints, dt, time_ + dt); }
+  if (!model.joints.empty() && !scratch.contacts.empty()) {
+    // the joints coupled bodies the contacts saw apart (a glued pair landing: the upper one's
+    // momentum now pushes the lower into the ground): contacts once more, then the joints
+    { StageTimer timer(profile_, Stage::kContacts); resolve_contacts(model, data, scratch, settings_, dt); }
+    { StageTimer timer(profile_, Stage::kShockPropagation); propagate_shocks(model, data, scratch, settings_); }
+    { StageTimer timer(profile_, Stage::kJoints); solve_joints(model, data, scratch.joints, dt, time_ + dt); }
+  }
   { StageTimer timer(profile_, Stage::kPositions); update_positions(model, data, scratch, settings_, dt); }
   { StageTimer timer(profile_, Stage::kSleeping); update_sleeping(model, data, scratch, settings_, dt); }
   stats_.impulses += scratch.impulses;

@@ -40,6 +40,16 @@ class World {
   Cloth& cloth(int i) { return cloths_[i].cloth; }
   // the edges of cloth i, (j, k) with j < k, sorted
   const std::vector<std::array<int, 2>>& cloth_edges(int i) const { return cloths_[i].contact.edges(); }
+  // Validates and adds a joint between two bodies (or a body and the world, kWorldBody);
+  // returns its index
+  int add_joint(const JointDesc& desc);
+  int joint_count() const { return static_cast<int>(rigid_model_.joints.size()); }
+  const JointState& joint_state() const { return rigid_data_.joints; }
+  // Joint j's error now: the gap between its frames along what it holds (m), and the angle (rad)
+  JointError joint_error(int j) const { return simbake::joint_error(rigid_model_, rigid_data_, j); }
+  // Bodies a and b never collide; collision groups (rigid/collision_filter.h)
+  void filter_pair(int a, int b);
+  void set_collision_groups(const std::vector<std::vector<int>>& members, const std::vector<std::vector<int>>& filters);
   // Makes kinematic body i follow a key track from now on (time 0 is when the world starts)
   void set_kinematic_track(int i, KinematicTrack track);
   double time() const { return time_; }  // (s) simulated so far

@@ -129,6 +129,39 @@ class ClothDesc:
     self_collision: bool
     def __init__(self, **fields: Any) -> None: ...
 
+class JointDrive:
+    stiffness: float                 # N/m or N m/rad (acceleration drives: 1/s^2)
+    damping: float                   # N s/m or N m s/rad (acceleration drives: 1/s)
+    target_position: float           # m or rad
+    target_velocity: float           # m/s or rad/s
+    max_force: float                 # N or N m; inf: unbounded
+    acceleration: bool               # False: a force drive
+    def __init__(self, **fields: Any) -> None: ...
+
+class JointDesc:
+    type: str                        # fixed | revolute | prismatic | spherical | distance | d6
+    body0: int                       # body index, or -1: the world
+    body1: int
+    local_position0: Array           # (3,) joint frame in body 0's mesh frame (m)
+    local_rotation0: Array           # (4,) [w, x, y, z]
+    local_position1: Array           # (3,) and in body 1's
+    local_rotation1: Array
+    axis: str                        # x | y | z (revolute, prismatic, spherical)
+    lower_limit: float               # revolute (rad), prismatic (m); -inf: none
+    upper_limit: float
+    cone_angle0: float               # spherical (rad); inf: free
+    cone_angle1: float
+    min_distance: float              # distance (m)
+    max_distance: float
+    dof_lower: list[float]           # d6, trans_x .. rot_z (m, rad); lower > upper locks
+    dof_upper: list[float]
+    drives: dict[str, JointDrive]    # by degree of freedom: trans_x .. rot_z
+    break_force: float               # N; inf: unbreakable
+    break_torque: float              # N m
+    enabled: bool
+    collision_enabled: bool          # False: the two bodies never collide
+    def __init__(self, **fields: Any) -> None: ...
+
 # ---- the world
 
 class World:
@@ -139,6 +172,9 @@ class World:
     def set_ground(self, ground: GroundDef | None = None, **fields: Any) -> None: ...
     def add_body(self, desc: BodyDesc | None = None, **fields: Any) -> int: ...
     def add_cloth(self, desc: ClothDesc | None = None, **fields: Any) -> int: ...
+    def add_joint(self, desc: JointDesc | None = None, **fields: Any) -> int: ...
+    def filter_pair(self, a: int, b: int) -> None: ...
+    def set_collision_groups(self, members: list[list[int]], filters: list[list[int]]) -> None: ...
     def set_kinematic_track(self, index: int, times: list[float], positions: Array, orientations: Array) -> None: ...
 
     def step_frame(self, frame_dt: float, substeps: int = 0) -> int: ...
@@ -152,6 +188,11 @@ class World:
     def cloth_count(self) -> int: ...
     @property
     def sleeping_count(self) -> int: ...
+    @property
+    def joint_count(self) -> int: ...
+    def joint_states(self) -> dict[str, npt.NDArray[Any]]:
+        """enabled (n,) bool, broke_at (n,) s (NaN while whole), gap (n,) m and angle (n,) rad
+        between each joint's frames, force (n, 3) N and torque (n, 3) N m on body 1 last step."""
     @property
     def time(self) -> float: ...
     def body_states(self) -> dict[str, npt.NDArray[Any]]:

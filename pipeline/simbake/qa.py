@@ -24,6 +24,11 @@ Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
 * ``energy_gain``, ``unexplained_stop``, ``imparted_speed``: energy made up by the solver, a
   body stopping in mid-air, a body launched faster than anything but a keyed body could make
   it (simbake.qa_motion, where each is defined with its threshold).
+* ``joint_error``: 1 mm (scenes with joints). The largest gap between a joint's two frames
+  along what the joint holds (its origins for a ball, hinge or fixed joint; off the axis for a
+  slider; past the range for a distance joint), over the joints not broken. The solver closes
+  joints to well under a micrometre; a millimetre at a chain link or a hinge shows in a
+  close-up.
 * ``cloth_fallbacks``: 0. The cloth steps' fallbacks in the frame (README, "Bounded work"):
   steps a cloth held still (its impact zones did not settle, or its self-collision ran out
   of its work budget), impact zones a keyed body would have pressed into the ground, steps
@@ -41,7 +46,8 @@ The JSON layout (version 1)::
                  "cloth_self_intersections": [...], "cloth_fallbacks": [...],
                  "energy_gain": [...],
                  "unexplained_stop": [...], "unexplained_stop_body": [name | null],
-                 "imparted_speed": [...], "imparted_speed_body": [name | null]},
+                 "imparted_speed": [...], "imparted_speed_body": [name | null],
+                 "joint_error": [...], "joint_error_joint": [name | null]},   # (with joints)
      "cloths": {name: {"strain": [...], "self_intersections": [...],
                        "vertex_penetration": [...], "edge_penetration": [...]}},
      "summary": {figure: {"worst": v, "frame": f, "threshold": t, "first_over": f | null}},
@@ -67,6 +73,7 @@ from .scene import Scene
 QA_VERSION = 2
 BODY_PENETRATION = 5e-3       # (m)
 CLOTH_PENETRATION = 1e-3      # (m)
+JOINT_ERROR = 1e-3            # (m)
 STRAIN_MARGIN = 0.01          # of the strain limit
 MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
 # World.statistics() counters of the cloth step's fallbacks (README "Bounded work"), summed
@@ -93,6 +100,7 @@ def thresholds(scene: Scene) -> dict[str, float | None]:
         "cloth_self_intersections": 0 if scene.cloths else None,
         "substeps": MAX_SUBSTEPS - 1 if scene.substeps == 0 else None,  # a fixed count is the scene's
         "cloth_fallbacks": 0 if scene.cloths else None,
+        **({"joint_error": JOINT_ERROR} if scene.joints else {}),
         "kinetic_energy": None,
         "wall_seconds": None,
     }
@@ -112,7 +120,9 @@ class QualityRecorder:
         self.figures: dict[str, list] = {k: [] for k in (
             "substeps", "wall_seconds", "kinetic_energy", "body_penetration",
             "body_penetration_between", "cloth_penetration", "cloth_strain",
-            "cloth_self_intersections", "cloth_fallbacks") + (_MOTION if motion is not None else ())}
+            "cloth_self_intersections", "cloth_fallbacks") + (_MOTION if motion is not None else ())
+            + (("joint_error", "joint_error_joint") if scene.joints else ())}
+        self.joint_names = [j.name for j in scene.joints]
         self._fallbacks = 0  # the fallbacks counted up to the last recorded frame
         self.cloths: dict[str, dict[str, list]] = {
             name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
@@ -155,6 +165,16 @@ class QualityRecorder:
         f["cloth_penetration"].append(deepest)
         f["cloth_strain"].append(strain)
         f["cloth_self_intersections"].append(crossings)
+        if self.joint_names:
+            self._record_joints(world)
+
+    def _record_joints(self, world) -> None:
+        """The largest gap of any joint not broken, and which joint."""
+        states = world.joint_states()
+        gaps = [float(g) if e else 0.0 for g, e in zip(states["gap"], states["enabled"])]
+        worst = max(range(len(gaps)), key=lambda k: (gaps[k], -k))
+        self.figures["joint_error"].append(gaps[worst])
+        self.figures["joint_error_joint"].append(self.joint_names[worst] if gaps[worst] > 0 else None)
 
     def _record_motion(self, frame: int, world, origins, overlapping: bool) -> None:
         time = (frame - self.scene.start_frame) / self.scene.fps
@@ -227,6 +247,10 @@ class QualityRecorder:
         over("substeps at the solver's cap", self.figures["substeps"], self.thresholds["substeps"], "", 1)
         over("cloth fallbacks (steps held still, bodies let through the cloth)", self.figures["cloth_fallbacks"],
              self.thresholds["cloth_fallbacks"], "", 1)
+        if self.joint_names:
+            who = self.figures["joint_error_joint"]
+            over("joint error (gap between a joint's frames)", self.figures["joint_error"], JOINT_ERROR, "mm", 1e3,
+                 lambda k: f" ({who[k]})" if who[k] else "")
         if self.motion is not None:
             self._motion_warnings(over)
         return lines

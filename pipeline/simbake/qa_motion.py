@@ -60,7 +60,9 @@ class MotionFigures:
         self.gravity = np.asarray(scene.gravity, dtype=np.float64)
         self.ground = scene.ground.height if scene.ground is not None else None
         self.dynamic = np.array([not b.kinematic for b in scene.bodies], dtype=bool)
-        self.has_source = any(_moving_kinematic(b) for b in scene.bodies)
+        # (a joint drive is a motor: a source too)
+        self.has_source = (any(_moving_kinematic(b) for b in scene.bodies)
+                           or any(j.drives and j.enabled for j in getattr(scene, "joints", ())))
         self.masses, self.radii = np.asarray(masses, dtype=np.float64), np.asarray(radii, dtype=np.float64)
         self.cloth_masses = cloth_masses
         self.total_mass = float(self.masses[self.dynamic].sum() + sum(m.sum() for m in cloth_masses))

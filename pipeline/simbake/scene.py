@@ -15,6 +15,14 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
                 damping, strain_limit, compression, friction, thickness, pinned,
                 model (springs | membrane), poisson_ratio, integrator (implicit | explicit),
                 self_collision (true | false)
+    [[joints]]  name (required), type (fixed | revolute | prismatic | spherical | distance | d6),
+                body0, body1 (body names; absent: the world), local_position0/1,
+                local_rotation0/1, axis (x | y | z), lower_limit, upper_limit, cone_angle0/1,
+                min_distance, max_distance, limits = { rot_x = [lo, hi] | "locked", ... } (d6),
+                drives = { angular = { stiffness, damping, target_position, target_velocity,
+                max_force, type = "force" | "acceleration" }, ... }, break_force, break_torque,
+                enabled, collision_enabled
+    filtered_pairs = [["a", "b"], ...]            (pairs of bodies that never collide)
 
 The full reference, with defaults, is the section "Scene file (TOML), version 1" of
 DESIGN.md; the defaults here are the dataclass defaults below.
@@ -45,8 +53,8 @@ from typing import Any, Callable, Iterable, Optional
 from .errors import SceneError
 from .limits import check_scene
 
-__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Scene", "load_toml_scene", "read_scene_data",
-           "scene_from_data"]
+__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Drive", "Joint", "Scene", "load_toml_scene",
+           "read_scene_data", "scene_from_data"]
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -60,6 +68,11 @@ COMPRESSION_MODES = ("subgrid", "enforce", "none")
 CLOTH_MODELS = ("springs", "membrane")
 CLOTH_INTEGRATORS = ("implicit", "explicit")
 RESERVED_NAMES = ("World",)  # the root prim of every cache
+JOINT_TYPES = ("fixed", "revolute", "prismatic", "spherical", "distance", "d6")
+JOINT_AXES = ("x", "y", "z")
+JOINT_DOFS = ("trans_x", "trans_y", "trans_z", "rot_x", "rot_y", "rot_z")  # UsdPhysics' transX .. rotZ
+DRIVE_TYPES = ("force", "acceleration")
+INF = math.inf
 _PRIM_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
@@ -155,6 +168,50 @@ class Cloth:
     prim_path: str = ""
 
 
+@dataclass(frozen=True)
+class Drive:
+    """A joint drive (UsdPhysics' PhysicsDriveAPI) on one degree of freedom, SI units: force =
+    stiffness (target_position - position) + damping (target_velocity - velocity), at most
+    max_force; an acceleration drive's gains are per unit of effective mass."""
+
+    stiffness: float = 0.0        # N/m or N m/rad (acceleration: 1/s^2)
+    damping: float = 0.0          # N s/m or N m s/rad (acceleration: 1/s)
+    target_position: float = 0.0  # m or rad
+    target_velocity: float = 0.0  # m/s or rad/s
+    max_force: float = INF        # N or N m
+    type: str = "force"           # force | acceleration
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint between two bodies (or a body and the world), UsdPhysics' joints in SI units.
+    Frames are in each body's frame (its mesh origin and orientation); the world's frame for
+    an absent body."""
+
+    name: str
+    type: str                     # fixed | revolute | prismatic | spherical | distance | d6
+    body0: str = ""               # a body's name; "": the world
+    body1: str = ""
+    local_position0: Vec3 = ZERO3
+    local_rotation0: Quat = IDENTITY
+    local_position1: Vec3 = ZERO3
+    local_rotation1: Quat = IDENTITY
+    axis: str = "x"               # revolute, prismatic, spherical
+    lower_limit: float = -INF     # revolute (rad), prismatic (m)
+    upper_limit: float = INF
+    cone_angle0: float = INF      # spherical (rad)
+    cone_angle1: float = INF
+    min_distance: float = 0.0     # distance (m)
+    max_distance: float = INF
+    limits: tuple[tuple[str, float, float], ...] = ()  # d6: (dof, lower, upper); lower > upper: locked
+    drives: tuple[tuple[str, Drive], ...] = ()         # (linear | angular | trans_x .. rot_z, drive)
+    break_force: float = INF      # N
+    break_torque: float = INF     # N m
+    enabled: bool = True
+    collision_enabled: bool = False
+    prim_path: str = ""           # a USD shot's joint: its prim
+
+
 @dataclass(frozen=True, kw_only=True)
 class Scene:
     """A validated scene. Keyword-only because ``end_frame`` is required but follows defaults."""
@@ -169,6 +226,12 @@ class Scene:
     ground: Ground | None = None
     bodies: tuple[Body, ...] = ()
     cloths: tuple[Cloth, ...] = ()
+    joints: tuple[Joint, ...] = ()
+    filtered_pairs: tuple[tuple[str, str], ...] = ()  # bodies (by name) that never collide
+    # (a USD shot's collision groups, PhysicsCollisionGroup: each body's groups and each
+    # group's filtered groups, by index)
+    collision_groups: tuple[tuple[str, tuple[int, ...]], ...] = ()
+    group_filters: tuple[tuple[int, ...], ...] = ()
     warnings: tuple[str, ...] = ()  # what loading left out or changed, one line each
     shot: Any = None  # a USD shot's simbake.usd_scene.ShotInfo (for its cache layer); else None
 
@@ -221,7 +284,7 @@ def _file_digest(path: Path) -> bytes:
 # Loading
 # --------------------------------------------------------------------------------------
 
-_TOP_KEYS = ("scene", "solver", "ground", "bodies", "cloths")
+_TOP_KEYS = ("scene", "solver", "ground", "bodies", "cloths", "joints", "filtered_pairs")
 _SCENE_KEYS = ("fps", "start_frame", "end_frame", "gravity")
 _SOLVER_KEYS = ("substeps",)
 _GROUND_KEYS = ("height", "friction", "restitution")
@@ -239,9 +302,18 @@ _CLOTH_KEYS = (
     "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator", "self_collision",
 )  # fmt: skip
 _GRID_KEYS = ("size", "resolution")
+_JOINT_KEYS = ("name", "type", "body0", "body1", "local_position0", "local_rotation0", "local_position1",
+               "local_rotation1", "axis", "lower_limit", "upper_limit", "cone_angle0", "cone_angle1",
+               "min_distance", "max_distance", "limits", "drives", "break_force", "break_torque", "enabled",
+               "collision_enabled")
+_DRIVE_KEYS = ("stiffness", "damping", "target_position", "target_velocity", "max_force", "type")
+_TYPE_KEYS = {"revolute": ("axis", "lower_limit", "upper_limit"), "prismatic": ("axis", "lower_limit", "upper_limit"),
+              "spherical": ("axis", "cone_angle0", "cone_angle1"), "distance": ("min_distance", "max_distance"),
+              "d6": ("limits",)}
 # the keys each table allows (simbake.wedge_takes checks --set key paths against it)
 TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KEYS, "bodies": _BODY_KEYS,
-              "cloths": _CLOTH_KEYS, "bodies.shape": _ANY_SHAPE_KEYS, "cloths.grid": _GRID_KEYS}
+              "cloths": _CLOTH_KEYS, "bodies.shape": _ANY_SHAPE_KEYS, "cloths.grid": _GRID_KEYS,
+              "joints": _JOINT_KEYS}
 
 
 def load_toml_scene(path: str | os.PathLike[str]) -> Scene:
@@ -302,6 +374,9 @@ def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene
     bodies = tuple(_body(t, base_dir) for t in root.tables("bodies", _BODY_KEYS))
     cloths = tuple(_cloth(t, base_dir) for t in root.tables("cloths", _CLOTH_KEYS))
     _check_unique_names(file, bodies, cloths)
+    names = [b.name for b in bodies]
+    joints = tuple(_joint(t, names) for t in root.tables("joints", _JOINT_KEYS))
+    _check_unique_joints(file, joints)
 
     scene = Scene(
         path=scene_path,
@@ -314,6 +389,8 @@ def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene
         ground=_ground(root.subtable("ground", _GROUND_KEYS)) if root.has("ground") else None,
         bodies=bodies,
         cloths=cloths,
+        joints=joints,
+        filtered_pairs=_filtered_pairs(root, names),
     )
     check_scene(scene)  # the physical range and the budget of what the scene alone decides
     return scene
@@ -452,12 +529,108 @@ def _poisson(value: float) -> str | None:
 
 
 
-def _orientation(t: _Table, default: Quat = IDENTITY) -> Quat:
+def _joint(t: _Table, bodies: list[str]) -> Joint:
+    """A ``[[joints]]`` table: keys of other types than its own are errors, bodies must exist."""
+    kind = t.string("type", check=_one_of(JOINT_TYPES))
+    own = _TYPE_KEYS.get(kind, ())
+    for key in t.data:
+        if any(key in keys for keys in _TYPE_KEYS.values()) and key not in own:
+            raise t.error(key, f"does not apply to a {kind} joint")
+    ends = [t.string(f"body{k}", "") for k in (0, 1)]
+    for k, name in enumerate(ends):
+        if name and name not in bodies:
+            raise t.error(f"body{k}", f"no body named {_short(name)!r}")
+    if ends[0] == ends[1]:
+        raise t.error("body1", "must differ from body0 (absent: the world)")
+    lower, upper = t.number("lower_limit", -INF), t.number("upper_limit", INF)
+    if lower > upper:
+        raise t.error("upper_limit", f"must be >= lower_limit ({lower}), got {upper}")
+    if kind == "revolute" and not (-math.pi <= lower and upper <= math.pi):
+        raise t.error("lower_limit" if lower < -math.pi else "upper_limit", "must be within [-pi, pi] rad")
+    low_d, high_d = t.number("min_distance", 0.0, _at_least(0)), t.number("max_distance", INF, _at_least(0))
+    if low_d > high_d:
+        raise t.error("max_distance", f"must be >= min_distance ({low_d}), got {high_d}")
+    return Joint(
+        name=t.string("name", check=_prim_name), type=kind, body0=ends[0], body1=ends[1],
+        local_position0=t.vector("local_position0", 3, ZERO3), local_rotation0=_orientation(t, key="local_rotation0"),
+        local_position1=t.vector("local_position1", 3, ZERO3), local_rotation1=_orientation(t, key="local_rotation1"),
+        axis=t.string("axis", "x", _one_of(JOINT_AXES)), lower_limit=lower, upper_limit=upper,
+        cone_angle0=t.number("cone_angle0", INF, _at_least(0)), cone_angle1=t.number("cone_angle1", INF, _at_least(0)),
+        min_distance=low_d, max_distance=high_d, limits=_joint_limits(t), drives=_joint_drives(t, kind),
+        break_force=t.number("break_force", INF, _greater(0)), break_torque=t.number("break_torque", INF, _greater(0)),
+        enabled=t.boolean("enabled", True), collision_enabled=t.boolean("collision_enabled", False))
+
+
+def _joint_limits(t: _Table) -> tuple[tuple[str, float, float], ...]:
+    """``limits = { rot_x = [lower, upper] | "locked", ... }``: a d6 joint's degrees of freedom
+    (unlisted: free)."""
+    table = t.subtable("limits", JOINT_DOFS)
+    limits = []
+    for dof in JOINT_DOFS:
+        if not table.has(dof):
+            continue
+        if table.data[dof] == "locked":
+            limits.append((dof, 1.0, -1.0))
+            continue
+        if isinstance(table.data[dof], str):
+            raise table.error(dof, f'must be [lower, upper] or "locked", got {_describe(table.data[dof])}')
+        lower, upper = table.vector(dof, 2)
+        if lower > upper:
+            raise table.error(dof, f'lower must be <= upper (write "locked" to lock it), got [{lower}, {upper}]')
+        limits.append((dof, lower, upper))
+    return tuple(limits)
+
+
+def _joint_drives(t: _Table, kind: str) -> tuple[tuple[str, Drive], ...]:
+    """``drives = { angular = {...}, ... }``: linear (prismatic), angular (revolute) or a d6 joint's
+    degrees of freedom."""
+    allowed = {"revolute": ("angular",), "prismatic": ("linear",), "d6": JOINT_DOFS}.get(kind, ())
+    table = t.subtable("drives", allowed)
+    drives = []
+    for name in allowed:
+        if not table.has(name):
+            continue
+        d = table.subtable(name, _DRIVE_KEYS)
+        drives.append((name, Drive(
+            stiffness=d.number("stiffness", 0.0, _at_least(0)), damping=d.number("damping", 0.0, _at_least(0)),
+            target_position=d.number("target_position", 0.0), target_velocity=d.number("target_velocity", 0.0),
+            max_force=d.number("max_force", INF, _at_least(0)), type=d.string("type", "force", _one_of(DRIVE_TYPES)))))
+    return tuple(drives)
+
+
+def _check_unique_joints(file: str, joints: Iterable[Joint]) -> None:
+    seen: dict[str, int] = {}
+    for i, j in enumerate(joints):
+        if j.name in seen:
+            raise _error(file, f"joints[{i}].name", f"duplicate joint name {j.name!r} (also joints[{seen[j.name]}])")
+        seen[j.name] = i
+
+
+def _filtered_pairs(root: _Table, bodies: list[str]) -> tuple[tuple[str, str], ...]:
+    """``filtered_pairs = [["a", "b"], ...]``: pairs of bodies that never collide."""
+    value = root.data.get("filtered_pairs", [])
+    if not isinstance(value, list):
+        raise root.error("filtered_pairs", f"must be an array of [name, name] pairs, got {_describe(value)}")
+    pairs = []
+    for i, pair in enumerate(value):
+        key = f"filtered_pairs[{i}]"
+        if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(n, str) for n in pair)):
+            raise root.error(key, "must be a pair of body names [\"a\", \"b\"]")
+        for name in pair:
+            if name not in bodies:
+                raise root.error(key, f"no body named {_short(name)!r}")
+        if pair[0] == pair[1]:
+            raise root.error(key, "names the same body twice")
+        pairs.append((pair[0], pair[1]))
+    return tuple(pairs)
+
+
+def _orientation(t: _Table, default: Quat = IDENTITY, key: str = "orientation") -> Quat:
     """The ``orientation`` quaternion, normalized; a zero quaternion is an error."""
-    q = t.vector("orientation", 4, default)
+    q = t.vector(key, 4, default)
     scale = max(abs(c) for c in q)  # scale first so huge or tiny values cannot overflow
     if scale == 0.0:
-        raise t.error("orientation", "must be a non-zero quaternion [w, x, y, z], got all zeros")
+        raise t.error(key, "must be a non-zero quaternion [w, x, y, z], got all zeros")
     q = tuple(c / scale for c in q)
     norm = math.hypot(*q)
     return tuple(c / norm for c in q)  # type: ignore[return-value]

@@ -24,7 +24,7 @@ from .limits import check_budget, check_memory_in_flight, check_scene, crowding
 from .normals import corner_normals
 from .qa import QualityRecorder, qa_path
 from .qa_motion import MotionFigures, bounding_radius, lumped_masses, mean_edge
-from .scene import Scene
+from .scene import JOINT_DOFS, Scene
 from .usd_instancer import quaternion_rate
 from .usd_writer import BodyPrim, CacheWriter, ClothPrim, InstancerGroup
 from .version import __version__
@@ -93,7 +93,64 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
                             self_collision=cloth.self_collision)
         except ValueError as error:
             raise SceneError(scene.source, scene.source_key(f"cloths[{index}]"), str(error)) from None
+    _add_joints(world, scene)
     return world
+
+
+def _add_joints(world, scene: Scene) -> None:
+    """The scene's joints, filtered pairs and collision groups into the world."""
+    index = {b.name: i for i, b in enumerate(scene.bodies)}
+    for k, joint in enumerate(scene.joints):
+        lower, upper = [-np.inf] * 6, [np.inf] * 6
+        for dof, lo, hi in joint.limits:
+            lower[JOINT_DOFS.index(dof)], upper[JOINT_DOFS.index(dof)] = lo, hi
+        drives = {}
+        for name, d in joint.drives:
+            dof = {"linear": f"trans_{joint.axis}", "angular": f"rot_{joint.axis}"}.get(name, name)
+            drives[dof] = _core.JointDrive(stiffness=d.stiffness, damping=d.damping,
+                                           target_position=d.target_position, target_velocity=d.target_velocity,
+                                           max_force=d.max_force, acceleration=d.type == "acceleration")
+        try:
+            world.add_joint(type=joint.type, body0=index.get(joint.body0, -1), body1=index.get(joint.body1, -1),
+                            local_position0=np.array(joint.local_position0),
+                            local_rotation0=np.array(joint.local_rotation0),
+                            local_position1=np.array(joint.local_position1),
+                            local_rotation1=np.array(joint.local_rotation1), axis=joint.axis,
+                            lower_limit=joint.lower_limit, upper_limit=joint.upper_limit,
+                            cone_angle0=joint.cone_angle0, cone_angle1=joint.cone_angle1,
+                            min_distance=joint.min_distance, max_distance=joint.max_distance,
+                            dof_lower=lower, dof_upper=upper, drives=drives, break_force=joint.break_force,
+                            break_torque=joint.break_torque, enabled=joint.enabled,
+                            collision_enabled=joint.collision_enabled)
+        except ValueError as error:
+            raise SceneError(scene.source, scene.source_key(f"joints[{k}]"), str(error)) from None
+    for a, b in scene.filtered_pairs:
+        world.filter_pair(index[a], index[b])
+    if scene.collision_groups:
+        world.set_collision_groups([[index[name] for name, groups in scene.collision_groups if g in groups]
+                                    for g in range(len(scene.group_filters))],
+                                   [list(f) for f in scene.group_filters])
+
+
+def _joint_breaks(scene: Scene, world, frame: int, broken: dict) -> None:
+    """Joints that broke during the frame just stepped, by name, with the frame."""
+    if not scene.joints:
+        return
+    for j, enabled in enumerate(world.joint_states()["enabled"]):
+        if not enabled and scene.joints[j].enabled and scene.joints[j].name not in broken:
+            broken[scene.joints[j].name] = frame
+
+
+def _write_joint_breaks(scene: Scene, writer, broken: dict) -> None:
+    """A TOML cache records breaks in customLayerData["simbake"]["joints_broken"] (name: frame);
+    a shot's layer writes physics:jointEnabled false over the joint's prim from that frame."""
+    if not broken:
+        return
+    if scene.shot is None or not hasattr(writer, "write_joint_breaks"):  # (a shot's clips: as TOML's)
+        writer.add_layer_data({"simbake": {"joints_broken": dict(sorted(broken.items()))}})
+        return
+    paths = {j.name: j.prim_path for j in scene.joints}
+    writer.write_joint_breaks({paths[name]: frame for name, frame in broken.items()})
 
 
 @dataclass
@@ -309,6 +366,7 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
     pending = None  # the last frame stepped, written once the next one is known
     rates: list = []  # bodies' velocities over the frame written last
     cloth_count = len(scene.cloths)
+    broken: dict = {}  # joint name: the first frame it is broken at
     for frame in range(scene.start_frame, scene.end_frame + 1):
         frame_start = time.perf_counter()
         substeps = 0
@@ -320,6 +378,7 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
                                       "nothing was written (try more [solver] substeps)")
             max_penetration = max(max_penetration, stats["max_penetration"], stats["cloth_penetration"])
             check_memory_in_flight(scene, frame)
+            _joint_breaks(scene, world, frame, broken)
         written = time.perf_counter()
         stepping = written - frame_start
         current = _frame_state(frame, world, cloth_count)
@@ -340,6 +399,7 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
     pipeline_profile["usd_writer"] += time.perf_counter() - written
     if on_frame:
         on_frame(total, total)
+    _write_joint_breaks(scene, writer, broken)
     if recorder is not None:
         writer.add_layer_data({"simbake": {"qa": recorder.layer_summary()}})
     return max_penetration

@@ -359,6 +359,18 @@ class ShotLayerWriter(StreamingWriter):
         if self.flush_every and written % self.flush_every == 0 and self._next_frame <= self.end_frame:
             self._save()
 
+    def write_joint_breaks(self, breaks: Mapping[str, int]) -> None:
+        """Joints that broke (prim path: the first frame it is broken at): ``over`` the joint
+        with ``physics:jointEnabled`` time-sampled at every frame: true before that frame, false from it
+        (a sample at every frame, as every other attribute the cache samples)."""
+        for path, frame in sorted(breaks.items()):
+            prim = Sdf.CreatePrimInLayer(self._layer, path)
+            prim.specifier = Sdf.SpecifierOver
+            attr = prim.attributes.get("physics:jointEnabled") or Sdf.AttributeSpec(
+                prim, "physics:jointEnabled", Sdf.ValueTypeNames.Bool)
+            for f in range(self.start_frame, self.end_frame + 1):
+                self._layer.SetTimeSample(attr.path, float(f), f < frame)
+
     def add_layer_data(self, data: Mapping[str, Any]) -> None:
         merged = dict(self._layer.customLayerData)
         merge_into(merged, to_usd(dict(data), "customLayerData"))

@@ -34,7 +34,9 @@ from .errors import SceneError
 from .scene import (Body, Cloth, Ground, Key, Scene, Shape, DEFAULT_DENSITY, CLOTH_MODELS,
                     COMPRESSION_MODES, CLOTH_INTEGRATORS, RESERVED_NAMES)
 from . import usd_schema
+from .usd_joints import joint_kinds, read_filtering, read_joints
 from .limits import INERTIA_TOLERANCE, MAX_FRAMES, check_scene
+from .rotations import quat_from_matrix, quat_matrix
 from .usd_writer import one_thread
 from .usd_diagnostics import clean, error_texts, location, shown_path, syntax_message, trapped
 
@@ -130,35 +132,6 @@ class ShotInfo:
 
 def _matrix(gf_matrix) -> np.ndarray:
     return np.array(gf_matrix, dtype=np.float64).T
-
-
-def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
-    """The unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method), w >= 0."""
-    t = np.trace(r)
-    if t > 0:
-        s = math.sqrt(t + 1.0) * 2
-        q = (0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s)
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
-        q = ((r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s)
-    elif r[1, 1] > r[2, 2]:
-        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
-        q = ((r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s)
-    else:
-        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
-        q = ((r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s)
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    if q[0] < 0:
-        q = -q
-    return tuple(float(c) for c in q)  # type: ignore[return-value]
-
-
-def _quat_matrix(q) -> np.ndarray:
-    w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def _polar(m3: np.ndarray):
@@ -365,7 +338,7 @@ class _Reader:
         """A stage rigid frame -> simbake's (position (m), orientation (w, x, y, z)): the
         rotation C R C^T, so that body-frame coordinates turn with the axes too (b -> C b) and
         the same shot authored Y up or Z up gives the very same bodies."""
-        return self.point(t), _quat_from_matrix(self.C @ r @ self.C.T)
+        return self.point(t), quat_from_matrix(self.C @ r @ self.C.T)
 
     def body_points(self, v: np.ndarray) -> np.ndarray:
         """Body-frame points of the stage (rows, stage units) -> simbake's (m): mpu C b."""
@@ -393,13 +366,6 @@ class _Reader:
             if kind not in _SUPPORTED:
                 for p, _ in sorted(entries, key=lambda e: str(e[0])):
                     self.warn_once(str(kind), p, f"{_describe_kind(kind)} is not simulated by simbake; left out")
-        for p, d in sorted(shapes.items()):
-            if d.collisionGroups:
-                self.warn_once("PhysicsCollisionGroup", p, "collision groups are not simulated by simbake; "
-                                                           "the collider collides with everything")
-            if d.filteredCollisions:
-                self.warn_once("physics:filteredPairs", p, "filtered collision pairs are not simulated by "
-                                                           "simbake; the pair collides")
         self.substeps = self._physx()
 
         gravity = self._gravity(descs.get(T.Scene, []))
@@ -432,6 +398,8 @@ class _Reader:
                 bodies.append(self._static_body(p, d, used_names, len(bodies)))
 
         cloths, shot_cloths = self._cloths(used_names)
+        joints = read_joints(self, descs, bodies)
+        filtered_pairs, collision_groups, group_filters = read_filtering(descs, bodies, self.stage)
         self._named_warnings()
         ranged = ("--frames", "--frames") if self.frames_given else ("startTimeCode", "endTimeCode")
         self.keys += [("scene.fps", "timeCodesPerSecond"), ("scene.start_frame", ranged[0]),
@@ -450,7 +418,9 @@ class _Reader:
         return Scene(path=self.path, source=self.file, fps=self.tcps, substeps=self.substeps,
                      start_frame=int(self.start),
                      end_frame=int(self.end), gravity=gravity, ground=ground, bodies=tuple(bodies),
-                     cloths=tuple(cloths), warnings=tuple(self.warnings), shot=info)
+                     cloths=tuple(cloths), joints=joints, filtered_pairs=filtered_pairs,
+                     collision_groups=collision_groups, group_filters=group_filters,
+                     warnings=tuple(self.warnings), shot=info)
 
     def _dependencies(self) -> tuple[Path, ...]:
         """Every layer and asset the stage names (sublayers, references, payloads, value clips,
@@ -946,7 +916,7 @@ class _Reader:
             raise self.error(parent.GetPath(), "xformOpOrder",
                              "the parent of a dynamic rigid body must have a rotation and a uniform "
                              "scale (the cache overrides the body's own transform under it)")
-        return _quat_from_matrix(parts[0]), _vec(m[:3, 3]), float(parts[1].mean())
+        return quat_from_matrix(parts[0]), _vec(m[:3, 3]), float(parts[1].mean())
 
     def _mass(self, prim, colliders, r, k, material_density):
         """(mass kg | None, density kg/m^3 | None, centre of mass, inertia) from PhysicsMassAPI:
@@ -1024,7 +994,7 @@ class _Reader:
             if not (math.isfinite(norm) and norm > 0) and np.any(q != 0):
                 raise self.error(path, "physics:principalAxes", f"must be a finite, non-zero quaternion, got {_show(q)}")
             q = tuple(q / norm) if norm > 0 else (1.0, 0.0, 0.0, 0.0)
-        rot = _quat_matrix(q)
+        rot = quat_matrix(q)
         tensor = self.C @ rot @ np.diag(diag * self.kpu * self.mpu ** 2) @ rot.T @ self.C.T
         return tuple(_vec(row) for row in tensor)
 
@@ -1269,7 +1239,7 @@ def _value_text(value) -> str:
 
 _SUPPORTED_NAMES = ("Scene", "RigidBody", "RigidBodyMaterial", "CubeShape", "SphereShape",
                     "CapsuleShape", "CylinderShape", "MeshShape", "PlaneShape", "Capsule1Shape",
-                    "Cylinder1Shape")
+                    "Cylinder1Shape", *joint_kinds())
 
 
 class _SupportedKinds:
