@@ -21,15 +21,21 @@ double wrapped(double angle) {
   return angle;
 }
 
-// A row of one coordinate with its Jacobian for a translation along u (body 1: +u)
-JointRow translation_row(int j, RowCoordinate coordinate, int axis, const JointFrames& f, const Vec3& u,
-                         const int side[2]) {
+// A row of joint j's coordinate (on its axis) between the bodies `side`, its Jacobian unset
+JointRow empty_row(int j, RowCoordinate coordinate, int axis, const int side[2]) {
   JointRow row;
   row.joint = j;
   row.coordinate = coordinate;
   row.axis = axis;
   row.side[0] = side[0];
   row.side[1] = side[1];
+  return row;
+}
+
+// A row of one coordinate with its Jacobian for a translation along u (body 1: +u)
+JointRow translation_row(int j, RowCoordinate coordinate, int axis, const JointFrames& f, const Vec3& u,
+                         const int side[2]) {
+  JointRow row = empty_row(j, coordinate, axis, side);
   const Vec3 d = f.p1 - f.p0;
   row.linear[0] = -u;
   row.angular[0] = -(f.r0 + d).cross(u);
@@ -39,12 +45,7 @@ JointRow translation_row(int j, RowCoordinate coordinate, int axis, const JointF
 }
 
 JointRow rotation_row(int j, RowCoordinate coordinate, int axis, const Vec3& n, const int side[2]) {
-  JointRow row;
-  row.joint = j;
-  row.coordinate = coordinate;
-  row.axis = axis;
-  row.side[0] = side[0];
-  row.side[1] = side[1];
+  JointRow row = empty_row(j, coordinate, axis, side);
   row.linear[0] = row.linear[1] = Vec3::Zero();
   row.angular[0] = -n;
   row.angular[1] = n;

@@ -21,6 +21,8 @@ from pxr import Sdf, Usd
 import simbake
 from simbake import _core
 
+from benchmarks.common import body_state
+
 FPS = 24
 FRAME_DT = 1.0 / FPS
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
@@ -31,11 +33,6 @@ MAX_RECOVERY_SPEED = 0.5           # WorldSettings::max_recovery_speed (m/s)
 
 # --------------------------------------------------------------------------------------------
 # helpers
-
-
-def body_state(w, i: int) -> dict:
-    """Body i's state, from the world's state arrays."""
-    return {key: values[i] for key, values in w.body_states().items()}
 
 
 def add_box(w, size, mass, origin, orientation=IDENTITY, **kwargs) -> int:
