@@ -146,7 +146,7 @@ def _write_joint_breaks(scene: Scene, writer, broken: dict) -> None:
     a shot's layer writes physics:jointEnabled false over the joint's prim from that frame."""
     if not broken:
         return
-    if scene.shot is None or not hasattr(writer, "write_joint_breaks"):  # (a shot's clips: as TOML's)
+    if scene.shot is None:
         writer.add_layer_data({"simbake": {"joints_broken": dict(sorted(broken.items()))}})
         return
     paths = {j.name: j.prim_path for j in scene.joints}

@@ -193,6 +193,12 @@ class ShotClipsWriter(ClipsWriter):
         self._scene = scene
         self._level_sets = dict(level_sets or {})
         self._roots: list[tuple[str, str]] = []
+        self._breaks: dict[str, int] = {}
+
+    def write_joint_breaks(self, breaks: Mapping[str, int]) -> None:
+        """Broken joints go into the output layer itself (the clips carry no joint prims): its
+        time samples are stronger than the clips', and read as in a single-file shot cache."""
+        self._breaks.update(breaks)
 
     def _clip_writer(self, path: Path, first: int, last: int) -> StreamingWriter:
         from .usd_layer import ShotLayerWriter
@@ -209,7 +215,7 @@ class ShotClipsWriter(ClipsWriter):
         return self._roots
 
     def _result_layer(self) -> Sdf.Layer:
-        from .usd_layer import copy_stage_metadata
+        from .usd_layer import author_joint_breaks, copy_stage_metadata
 
         layer = Sdf.Layer.CreateAnonymous(".usda")
         copy_stage_metadata(layer, self._scene.shot)
@@ -219,4 +225,5 @@ class ShotClipsWriter(ClipsWriter):
         layer.subLayerPaths.append(f"./{self.folder.name}/topology.usdc")
         for root, manifest in self._roots:
             self._set_clips(layer, root, manifest)
+        author_joint_breaks(layer, self._breaks, self.start_frame, self.end_frame)
         return layer

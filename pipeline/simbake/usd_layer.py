@@ -93,6 +93,19 @@ def _qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 # the writer
 # --------------------------------------------------------------------------------------------
 
+def author_joint_breaks(layer: Sdf.Layer, breaks: Mapping[str, int], start: int, end: int) -> None:
+    """Joints that broke (prim path: the first frame it is broken at): ``over`` the joint
+    with ``physics:jointEnabled`` time-sampled at every frame of [start, end]: true before that
+    frame, false from it (a sample at every frame, as every other attribute the cache samples)."""
+    for path, frame in sorted(breaks.items()):
+        prim = Sdf.CreatePrimInLayer(layer, path)
+        prim.specifier = Sdf.SpecifierOver
+        attr = prim.attributes.get("physics:jointEnabled") or Sdf.AttributeSpec(
+            prim, "physics:jointEnabled", Sdf.ValueTypeNames.Bool)
+        for f in range(start, end + 1):
+            layer.SetTimeSample(attr.path, float(f), f < frame)
+
+
 class ShotLayerWriter(StreamingWriter):
     """Streams a shot's cache layer to ``path`` (``.usdc``/``.usd`` crate, ``.usda`` text).
 
@@ -360,16 +373,7 @@ class ShotLayerWriter(StreamingWriter):
             self._save()
 
     def write_joint_breaks(self, breaks: Mapping[str, int]) -> None:
-        """Joints that broke (prim path: the first frame it is broken at): ``over`` the joint
-        with ``physics:jointEnabled`` time-sampled at every frame: true before that frame, false from it
-        (a sample at every frame, as every other attribute the cache samples)."""
-        for path, frame in sorted(breaks.items()):
-            prim = Sdf.CreatePrimInLayer(self._layer, path)
-            prim.specifier = Sdf.SpecifierOver
-            attr = prim.attributes.get("physics:jointEnabled") or Sdf.AttributeSpec(
-                prim, "physics:jointEnabled", Sdf.ValueTypeNames.Bool)
-            for f in range(self.start_frame, self.end_frame + 1):
-                self._layer.SetTimeSample(attr.path, float(f), f < frame)
+        author_joint_breaks(self._layer, breaks, self.start_frame, self.end_frame)
 
     def add_layer_data(self, data: Mapping[str, Any]) -> None:
         merged = dict(self._layer.customLayerData)

@@ -149,3 +149,22 @@ def test_same_bits_at_any_thread_count(tmp_path):
         (tmp_path / str(threads)).mkdir()
         simbake.bake(scene, tmp_path / str(threads) / "joints.usdc", threads=threads, qa=False)
     assert same_bits.first_difference(tmp_path / "1" / "joints.usdc", tmp_path / "2" / "joints.usdc") is None
+
+
+def test_shot_clips_write_breaks_per_joint(tmp_path):
+    """--clips on a shot: each broken joint's physics:jointEnabled reads, composed over the
+    input, the same at every frame as in the single-file shot cache (the weak joint breaks)."""
+    from pxr import Usd
+
+    scene = simbake.load_scene(SHOT)
+    simbake.bake(scene, tmp_path / "one.usda", threads=1, qa=False, shot=tmp_path / "one.sim.usda")
+    simbake.bake(scene, tmp_path / "clips.usda", threads=1, qa=False, clips=10, shot=tmp_path / "clips.sim.usda")
+    one, clipped = (Usd.Stage.Open(str(tmp_path / f"{n}.sim.usda")) for n in ("one", "clips"))
+    joints = [j.prim_path for j in scene.joints]
+    breaks = 0
+    for path in joints:
+        a, b = (s.GetPrimAtPath(path).GetAttribute("physics:jointEnabled") for s in (one, clipped))
+        values = [a.Get(f) for f in range(scene.start_frame, scene.end_frame + 1)]
+        assert values == [b.Get(f) for f in range(scene.start_frame, scene.end_frame + 1)], path
+        breaks += values[-1] is False
+    assert breaks == 1
