@@ -150,6 +150,33 @@ void edge_contact(const OrientedBox& a, const OrientedBox& b, const AxisSearch& 
   out.count = 1;
 }
 
+// the face axis's contact: the incident face clipped to the reference face (see box_box_contact)
+bool face_contact(const OrientedBox& a, const OrientedBox& b, const AxisSearch& axes, double margin, BoxContact& out) {
+  const int face = axes.face;
+  const Vec3 d = b.center - a.center;
+  std::array<Vec3, 8> points;
+  std::array<double, 8> depths;
+  int count = 0;
+  if (face < 3) {
+    // a's face towards b is the reference; b's corners below it are moved back onto it, so
+    // that each point is on a's surface
+    const Vec3 towards_b = sign_of(a.rotation.col(face).dot(d)) * a.rotation.col(face);
+    clip_incident_face(a, face, towards_b, b, margin, points, depths, count);
+    out.normal = -towards_b;
+    for (int i = 0; i < count; ++i) out.points[i] = {points[i] + depths[i] * towards_b, depths[i]};
+  } else {
+    const int k = face - 3;
+    const Vec3 towards_a = -sign_of(b.rotation.col(k).dot(d)) * b.rotation.col(k);
+    clip_incident_face(b, k, towards_a, a, margin, points, depths, count);
+    out.normal = towards_a;
+    for (int i = 0; i < count; ++i) out.points[i] = {points[i], depths[i]};
+  }
+  out.depth = axes.best_face;
+  out.edge_edge = false;
+  out.count = count;
+  return count > 0;
+}
+
 }  // namespace
 
 bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& out) {
@@ -172,38 +199,19 @@ bool box_edge_contact(const OrientedBox& a, const OrientedBox& b, double margin,
   return true;
 }
 
-bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out) {
+bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out, BoxContact* faces) {
   AxisSearch axes;
   if (!search_axes(a, b, margin, axes)) return false;
   out.count = 0;
   if (axes.edge_preferred()) {
     edge_contact(a, b, axes, out);
+    if (faces != nullptr) {
+      faces->count = 0;
+      face_contact(a, b, axes, margin, *faces);
+    }
     return true;
   }
-  const int face = axes.face;
-  const double best_face = axes.best_face;
-  const Vec3 d = b.center - a.center;
-  std::array<Vec3, 8> points;
-  std::array<double, 8> depths;
-  int count = 0;
-  if (face < 3) {
-    // a's face towards b is the reference; b's corners below it are moved back onto it, so
-    // that each point is on a's surface
-    const Vec3 towards_b = sign_of(a.rotation.col(face).dot(d)) * a.rotation.col(face);
-    clip_incident_face(a, face, towards_b, b, margin, points, depths, count);
-    out.normal = -towards_b;
-    for (int i = 0; i < count; ++i) out.points[i] = {points[i] + depths[i] * towards_b, depths[i]};
-  } else {
-    const int k = face - 3;
-    const Vec3 towards_a = -sign_of(b.rotation.col(k).dot(d)) * b.rotation.col(k);
-    clip_incident_face(b, k, towards_a, a, margin, points, depths, count);
-    out.normal = towards_a;
-    for (int i = 0; i < count; ++i) out.points[i] = {points[i], depths[i]};
-  }
-  out.depth = best_face;
-  out.edge_edge = false;
-  out.count = count;
-  return count > 0;
+  return face_contact(a, b, axes, margin, out);
 }
 
 }  // namespace simbake

@@ -46,7 +46,11 @@ struct BoxContact {
 
 // The contact of box a with box b when they overlap or are apart by less than `margin` (m);
 // false when they are farther apart. Points closer than `margin` outside count (depth < 0).
-bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out);
+// With `faces`, an edge-against-edge contact also gives there the contact along the
+// shallowest face axis (the faces behind the edges, which may close within the step);
+// faces->count is 0 otherwise.
+bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out,
+                     BoxContact* faces = nullptr);
 
 // The same when that contact is an edge against an edge; false otherwise, without clipping
 // any face (the narrow phase asks this of every pair of boxes)
