@@ -149,3 +149,13 @@ def test_same_bits_at_any_thread_count(tmp_path):
         (tmp_path / str(threads)).mkdir()
         simbake.bake(scene, tmp_path / str(threads) / "joints.usdc", threads=threads, qa=False)
     assert same_bits.first_difference(tmp_path / "1" / "joints.usdc", tmp_path / "2" / "joints.usdc") is None
+
+
+def test_revolute_without_limits_is_free(tmp_path):
+    """A revolute joint with no limits given turns freely (its limits are infinite); a finite
+    limit outside [-pi, pi] is still an error naming the key."""
+    free = HANGING.replace('type = "fixed"', 'type = "revolute"\naxis = "z"')
+    joint = simbake.load_scene(_write(tmp_path, free)).joints[0]
+    assert joint.lower_limit == -math.inf and joint.upper_limit == math.inf
+    with pytest.raises(SceneError, match=r"joints\[0\]\.lower_limit: must be within \[-pi, pi\] rad"):
+        simbake.load_scene(_write(tmp_path, free + "lower_limit = -4.0\n"))
