@@ -65,11 +65,12 @@ def test_ragdoll_never_explodes(ragdoll):
     (inelastic contacts and the joints' damping only take it away; at most 0.1% of m g h above
     its start, measured 0), so no body's kinetic energy can exceed what the whole figure has
     released, E0 - PE(t) (measured at most 21% of it). Speed then: each body's centre at most
-    1.5 sqrt(v0^2 + 2 g (H - y)), v0 = 0.9 m/s the launch speed, H the figure's highest centre
-    at the start (its head) and y the body's height: free fall from the top, with room for a
-    trunk toppling about its feet (a rod falling about one end moves its top at sqrt(3/2) =
-    1.22x free fall) and tripping on a step edge, which whips the head on; measured 1.36x (the
-    head, 8.3 m/s, tripping at the first step). An explosion is tens of m/s."""
+    2 sqrt(v0^2 + 2 g (H - y)), v0 = 1.2 m/s the push, H the figure's highest centre at the
+    start (its head) and y the body's height: free fall from the top, with room for a figure
+    toppling about its feet (a rod falling about one end moves its top at sqrt(3/2) = 1.22x
+    free fall) whose legs are then stopped by a step while the rest swings on about the hips
+    (its momentum carried by less mass); measured 1.51x (the head, 10.3 m/s, as the legs hit
+    the first steps). The bound allows 15 m/s at the bottom; an explosion is far beyond it."""
     scene, bench, x, q, v, w = ragdoll
     moving = bench.moving()
     assert np.isfinite(x).all() and np.isfinite(v).all()
@@ -80,19 +81,20 @@ def test_ragdoll_never_explodes(ragdoll):
     released = e[0] - G * (masses * x[:, moving, 1]).sum(-1)
     assert (0.5 * masses * speed ** 2 <= released[:, None] + 1e-9).all()
     top = x[0, moving, 1].max()
-    allowed = np.sqrt(0.9 ** 2 + 2.0 * G * (top - x[:, moving, 1]).clip(0.0))
-    assert (speed <= 1.5 * allowed).all(), f"worst ratio {(speed / allowed).max():.3f}"
+    allowed = np.sqrt(1.2 ** 2 + 2.0 * G * (top - x[:, moving, 1]).clip(0.0))
+    assert (speed <= 2.0 * allowed).all(), f"worst ratio {(speed / allowed).max():.3f}"
     assert speed.max() > 5.0  # (it did fall down the stairs)
 
 
 def test_ragdoll_joints_closed_and_within_limits(ragdoll):
-    """Every joint's frames within 0.1 mm of each other at every frame (ten times under the
-    QA's 1 mm joint-error warning, which a preview would just show; measured 8 um at the
-    hardest landing), and no twist, swing cone or hinge passed by more than 0.5 degree
-    (the issue's bound for hinge limits), the hinges' axes kept aligned as well."""
+    """Every joint's frames within 1 um of each other at every frame: a thousandth of the QA's
+    1 mm joint-error warning, four orders above what is measured (1e-10 m: the joints'
+    Newton solve stops at 1e-10); a joint the solver lets open for one step (a gap of
+    centimetres) fails it. No twist, swing cone or hinge passed by more than 0.5 degree (the
+    issue's bound for hinge limits), the hinges' axes kept aligned as well."""
     scene, bench, x, q, v, w = ragdoll
     gaps, past = joint_scenes.joint_measures(bench, x, q)
-    assert gaps.max() < 1e-4
+    assert gaps.max() < 1e-6
     assert np.degrees(past.max()) < 0.5
     # (the limits are reached: the figure is not just hanging loose inside them)
     R = joint_scenes.matrices(q)
@@ -104,7 +106,7 @@ def test_ragdoll_joints_closed_and_within_limits(ragdoll):
 
 
 def test_ragdoll_rests_on_the_lower_steps(ragdoll):
-    """Over its last second every body moves slower than 0.1 m/s (from a peak of 8 m/s; see
+    """Over its last second every body moves slower than 0.1 m/s (from a peak of 10 m/s; see
     README Limitations: jointed bodies lying across the stairs' edges creep at up to 3 cm/s,
     they do not fall asleep), its energy is within 1% of m g h of its end value, every body
     has left the landing (x > 0) and is below the first step's top (1.0 m); the trunk lies on
@@ -123,9 +125,32 @@ def test_ragdoll_rests_on_the_lower_steps(ragdoll):
     assert (x[:, moving, 1] > 0.0).all()  # (nothing through the ground)
 
 
+def test_ragdoll_lands_on_the_stairs_not_in_them(ragdoll):
+    """Every box of the figure against every step (exact box-box overlap, the separating axes,
+    benchmarks/peers/scenes.box_overlap) at every frame: less than 15 mm deep, and no two
+    parts not jointed together overlap by more than 5 mm (the QA's bound). Measured: 7.9 mm
+    (the pelvis resting on the last step: joints solved after the contacts push resting
+    jointed bodies in, README Limitations; the QA warns of it), parts 0 mm."""
+    from benchmarks.peers.scenes import box_overlap
+
+    scene, bench, x, q, v, w = ragdoll
+    R = joint_scenes.matrices(q)
+    boxes = [i for i, b in enumerate(bench.bodies) if b.shape == "box"]
+
+    def depth(a, b):
+        half = [np.broadcast_to(np.array(bench.bodies[i].size) / 2, (len(x), 3)) for i in (a, b)]
+        return box_overlap(x[:, a], R[:, a], half[0], x[:, b], R[:, b], half[1]).max()
+
+    steps = [i for i in boxes if bench.bodies[i].kinematic]
+    parts = [i for i in boxes if not bench.bodies[i].kinematic]
+    assert max(depth(a, b) for a in parts for b in steps) < 0.015
+    joined = {frozenset((j.body0, j.body1)) for j in bench.joints}
+    assert max(depth(a, b) for a in parts for b in parts if a < b and frozenset((a, b)) not in joined) < 0.005
+
+
 # The flywheel: a regular 24-gon prism (circumradius 0.4 m, 20 kg) and a 0.76 x 0.06 x 0.12 m
-# bar (2 kg) glued across it, on a hinge about z, driven towards 2 pi rad/s at most 10 N m
-SIDES, RADIUS, WHEEL_M, BAR, BAR_M, TORQUE, TARGET = 24, 0.4, 20.0, (0.76, 0.06, 0.12), 2.0, 10.0, 2 * math.pi
+# bar (2 kg) glued across it, on a hinge about z, driven towards 0.8 pi rad/s at most 4 N m
+SIDES, RADIUS, WHEEL_M, BAR, BAR_M, TORQUE, TARGET = 24, 0.4, 20.0, (0.76, 0.06, 0.12), 2.0, 4.0, 0.8 * math.pi
 
 
 @pytest.fixture(scope="module")
@@ -140,10 +165,10 @@ def _spin(scene, w):
 
 
 def test_flywheel_spins_up_at_the_drives_torque_limit(flywheel):
-    """Below its target the drive gives its whole 10 N m: the wheel turns up at T / I, I about
+    """Below its target the drive gives its whole 4 N m: the wheel turns up at T / I, I about
     the axle from the shapes by hand: the 24-gon prism's J = m R^2 (2 + cos(2 pi / 24)) / 6
     (each of its triangles from the centre: A (2 R^2 + R^2 cos a) / 6), the bar's
-    m (a^2 + b^2) / 12. alpha = 5.957 rad/s^2 within 0.5%, from the frames whose speed is
+    m (a^2 + b^2) / 12. alpha = 2.383 rad/s^2 within 0.5%, from the frames whose speed is
     between 10% and 90% of the target; the bar turns with it."""
     scene, (x, q, v, w) = flywheel
     spin, names = _spin(scene, w)
@@ -159,7 +184,7 @@ def test_flywheel_spins_up_at_the_drives_torque_limit(flywheel):
 
 
 def test_flywheel_drive_holds_target_velocity(flywheel):
-    """Once there (at 1.05 s by the same figures), the drive holds one turn a second within
+    """Once there (at 1.05 s by the same figures), the drive holds 0.4 turn a second within
     1% (the issue's bound) to the end, the axle stays put (within 0.1 mm of the stand's
     point: the hinge's gap) and the wheel's axis stays along z."""
     scene, (x, q, v, w) = flywheel
