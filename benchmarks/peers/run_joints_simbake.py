@@ -1,9 +1,9 @@
 """simbake on one joint scene of the peer benchmark; prints one JSON line.
 
-    .venv/bin/python benchmarks/peers/run_joints_simbake.py chain50|ragdoll [--seconds S]
+    .venv/bin/python benchmarks/peers/run_joints_simbake.py chain50|ragdoll [--seconds S] [--substeps N]
 
 Settings: the world's defaults, one thread, stepped frame by frame (1/24 s) with automatic
-substeps, as a bake steps it. chain50: the world of tests/cpp/rigid/test_joints.cpp's
+substeps, as a bake steps it (--substeps N: N per frame instead; N = 10 is the peers' 240 Hz). chain50: the world of tests/cpp/rigid/test_joints.cpp's
 FiftyLinkChainStaysClosed (links with no shape: nothing collides), built with the bindings;
 ragdoll: the pipeline's own world for assets/scenes/ragdoll.toml (simbake.load_scene,
 load_assets, simulate.build_world). Only World.step_frame is timed.
@@ -42,7 +42,12 @@ def ragdoll_world(scene: joint_scenes.Scene, seconds: float) -> "_core.World":
 
 
 def main(argv=None) -> None:
-    args = joint_scenes.common_args(argv)
+    import argparse
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scene", choices=list(joint_scenes.SCENES))
+    ap.add_argument("--seconds", type=float, default=None)
+    ap.add_argument("--substeps", type=int, default=0, help="per frame (default 0: automatic)")
+    args = ap.parse_args(argv)
     scene = joint_scenes.build(args.scene, args.seconds)
     world = chain_world(scene) if scene.name == "chain50" else ragdoll_world(scene, scene.seconds)
     recorder = joint_scenes.Recorder(scene)
@@ -56,10 +61,10 @@ def main(argv=None) -> None:
     clock = joint_scenes.Clock()
     for frame in range(1, scene.frames + 1):
         with clock:
-            world.step_frame(1.0 / joint_scenes.FPS)
+            world.step_frame(1.0 / joint_scenes.FPS, args.substeps)
         record(frame)
     out = joint_scenes.result("simbake", simbake.__version__, scene, clock, recorder,
-                              {"threads": 1, "substeps": "automatic", "steps_taken": world.statistics()["substeps"]})
+                              {"threads": 1, "substeps": args.substeps or "automatic", "steps_taken": world.statistics()["substeps"]})
     print(json.dumps(out))
 
 
