@@ -97,6 +97,12 @@ def twisted_sheet(width: float, length: float, nw: int, nl: int, turns: float):
     return np.array(vertices), np.array(faces)
 
 
+def wheel(radius: float, width: float, sides: int):
+    """A regular polygon of `sides` (circumradius `radius`) in the xy plane, extruded along z."""
+    a = np.arange(sides) * 2 * np.pi / sides
+    return l_prism(np.column_stack([radius * np.cos(a), radius * np.sin(a)]), width)
+
+
 def main() -> None:
     write_obj(HERE / "torus.obj", *torus(0.3, 0.1, 32, 16))
     write_obj(HERE / "sphere.obj", *cube_sphere(0.2, 6))
@@ -104,6 +110,7 @@ def main() -> None:
     outline = np.array([(0.0, 0.0), (0.4, 0.0), (0.4, 0.2), (0.2, 0.2), (0.2, 0.6), (0.0, 0.6)])
     write_obj(HERE / "lshape.obj", *l_prism(outline - (0.2, 0.3), 0.2))
     # a cloth for heap.toml: 1 m wide, 3 m long, one and a half turns
+    write_obj(HERE / "wheel.obj", *wheel(0.4, 0.1, 24))
     write_obj(HERE / "twisted_sheet.obj", *twisted_sheet(1.0, 3.0, 25, 73, 1.5))
 
 

@@ -202,6 +202,15 @@ struct ComponentSolver {
       data.l[c.bodies[i]] = c.saved_l[i];
     }
     for (std::size_t r = 0; r < c.rows.size(); ++r) c.rows[r].impulse = c.saved_impulse[r];
+    mark_clamped();
+  }
+
+  // A drive row is out of the solve exactly while its impulse is at its bound (after a
+  // restore or a retake its impulse may be below it again: it rejoins the solve)
+  void mark_clamped() {
+    for (JointRow& row : c.rows) {
+      if (row.kind == RowKind::kDrive) row.clamped = std::abs(row.impulse) >= row.max_impulse;
+    }
   }
 
   // The last Newton step again, scaled by alpha, from the iterate it was taken at
@@ -209,6 +218,7 @@ struct ComponentSolver {
     for (std::size_t r = 0; r < c.rows.size(); ++r) {
       if (c.step[r] != 0.0) apply(c.rows[r], alpha * c.step[r]);
     }
+    mark_clamped();
   }
 
   void predict() {
@@ -298,18 +308,43 @@ struct ComponentSolver {
         for (int s : c.body_rows[i]) entries.emplace_back(slot[r], slot[s], coupling_at(moved, c.rows[s], i));
       }
     }
-    Eigen::SparseMatrix<double> A(m, m);
-    A.setFromTriplets(entries.begin(), entries.end());
-    Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu;
-    lu.compute(A);
-    if (lu.info() != Eigen::Success) return;
-    const Eigen::Map<const Eigen::VectorXd> b(c.residual.data(), m);
-    const Eigen::VectorXd delta = lu.solve(b);
-    if (!delta.allFinite()) return;
+    // A drive that would pass its bound is held at it (its row of A becomes the identity, its
+    // right-hand side the impulse that reaches the bound) and the system solved again, so that
+    // the other rows' impulses are those for the bounded drive, not the unbounded one (taking
+    // those gave a wheel glued to a bar half its drive's torque, after the line search)
+    Eigen::VectorXd b = Eigen::Map<const Eigen::VectorXd>(c.residual.data(), m);
+    std::vector<char> bounded(m, 0);
+    Eigen::VectorXd delta;
+    for (int attempt = 0; attempt <= m; ++attempt) {
+      Eigen::SparseMatrix<double> A(m, m);
+      A.setFromTriplets(entries.begin(), entries.end());
+      Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu;
+      lu.compute(A);
+      if (lu.info() != Eigen::Success) return;
+      delta = lu.solve(b);
+      if (!delta.allFinite()) return;
+      bool more = false;
+      for (int k = 0; k < m; ++k) {
+        const JointRow& row = c.rows[c.active[k]];
+        if (row.kind != RowKind::kDrive || bounded[k] || std::abs(row.impulse + delta[k]) <= row.max_impulse) continue;
+        bounded[k] = 1;
+        more = true;
+        b[k] = std::clamp(row.impulse + delta[k], -row.max_impulse, row.max_impulse) - row.impulse;
+      }
+      if (!more) break;
+      std::vector<Eigen::Triplet<double>> kept;
+      for (const auto& t : entries) {
+        if (!bounded[t.row()]) kept.push_back(t);
+      }
+      for (int k = 0; k < m; ++k) {
+        if (bounded[k]) kept.emplace_back(k, k, 1.0);
+      }
+      entries.swap(kept);
+    }
     for (int k = 0; k < m; ++k) {
       JointRow& row = c.rows[c.active[k]];
       double total = row.impulse + delta[k];
-      if (row.kind == RowKind::kDrive && std::abs(total) > row.max_impulse) {
+      if (bounded[k]) {
         total = std::clamp(total, -row.max_impulse, row.max_impulse);
         row.clamped = true;
       }

@@ -545,8 +545,9 @@ def _joint(t: _Table, bodies: list[str]) -> Joint:
     lower, upper = t.number("lower_limit", -INF), t.number("upper_limit", INF)
     if lower > upper:
         raise t.error("upper_limit", f"must be >= lower_limit ({lower}), got {upper}")
-    if kind == "revolute" and not (-math.pi <= lower and upper <= math.pi):
-        raise t.error("lower_limit" if lower < -math.pi else "upper_limit", "must be within [-pi, pi] rad")
+    # (a limit left out is infinite: that side is free)
+    if kind == "revolute" and not ((lower == -INF or -math.pi <= lower) and (upper == INF or upper <= math.pi)):
+        raise t.error("lower_limit" if -INF < lower < -math.pi else "upper_limit", "must be within [-pi, pi] rad")
     low_d, high_d = t.number("min_distance", 0.0, _at_least(0)), t.number("max_distance", INF, _at_least(0))
     if low_d > high_d:
         raise t.error("max_distance", f"must be >= min_distance ({low_d}), got {high_d}")

@@ -168,3 +168,13 @@ def test_shot_clips_write_breaks_per_joint(tmp_path):
         assert values == [b.Get(f) for f in range(scene.start_frame, scene.end_frame + 1)], path
         breaks += values[-1] is False
     assert breaks == 1
+
+
+def test_revolute_without_limits_is_free(tmp_path):
+    """A revolute joint with no limits given turns freely (its limits are infinite); a finite
+    limit outside [-pi, pi] is still an error naming the key."""
+    free = HANGING.replace('type = "fixed"', 'type = "revolute"\naxis = "z"')
+    joint = simbake.load_scene(_write(tmp_path, free)).joints[0]
+    assert joint.lower_limit == -math.inf and joint.upper_limit == math.inf
+    with pytest.raises(SceneError, match=r"joints\[0\]\.lower_limit: must be within \[-pi, pi\] rad"):
+        simbake.load_scene(_write(tmp_path, free + "lower_limit = -4.0\n"))

@@ -197,6 +197,8 @@ def path_edits(folder: Path, pattern: str) -> list[str]:
     `folder` that adds anything but the file's own folder (`HERE` must be that folder too)."""
     found = []
     for path in sorted(folder.glob(pattern)):
+        if any(part.startswith(".venv") for part in path.relative_to(folder).parts):
+            continue  # (the peers' virtual environments, gitignored: not ours)
         tree = ast.parse(path.read_text(), str(path))
         here = [ast.unparse(n.value) for n in ast.walk(tree) if isinstance(n, ast.Assign)
                 and any(isinstance(t, ast.Name) and t.id == "HERE" for t in n.targets)]

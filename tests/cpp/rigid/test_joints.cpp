@@ -403,6 +403,36 @@ TEST(Joints, DriveHoldsTargetVelocity) {
   }
 }
 
+// A velocity drive at its bound gives its max_force, also when another joint shares the
+// component: a wheel (box) with a bar glued across it, on a hinge to the world, spun up from
+// rest at most T: alpha = T / (I_wheel + I_bar) from the boxes' moments, while below the target
+TEST(Joints, DriveAtItsBoundGivesItsMaxForce) {
+  for (double bar_mass : {0.2, 2.0, 20.0}) {
+    WorldSettings settings;
+    settings.gravity = Vec3::Zero();
+    World world(settings);
+    world.add_body(box_body(Vec3(0.8, 0.8, 0.1), 20.0, Vec3::Zero()));
+    world.add_body(box_body(Vec3(0.76, 0.06, 0.12), bar_mass, Vec3::Zero()));
+    JointDesc glue;
+    glue.body0 = 0;
+    glue.body1 = 1;
+    world.add_joint(glue);
+    JointDesc axle;
+    axle.type = JointType::kRevolute;
+    axle.body1 = 0;
+    axle.axis = 2;
+    axle.drives[kRotZ] = JointDrive{true, 0.0, 1e4, 0.0, 100.0, 10.0, false};
+    world.add_joint(axle);
+    const double inertia = 20.0 * (0.64 + 0.64) / 12.0 + bar_mass * (0.76 * 0.76 + 0.06 * 0.06) / 12.0;
+    for (int k = 0; k < 240; ++k) world.step(1.0 / 240.0);
+    const double alpha = angular_velocity(world.body_def(0), world.body_state(0)).z();  // (after 1 s)
+    EXPECT_NEAR(alpha / (10.0 / inertia), 1.0, 1e-3) << "bar " << bar_mass;
+    EXPECT_NEAR(angular_velocity(world.body_def(1), world.body_state(1)).z(), alpha, 1e-6 * alpha);
+    std::printf("drive at its bound, bar %.1f kg: alpha %.6f rad/s^2 (T / I = %.6f)\n", bar_mass, alpha,
+                10.0 / inertia);
+  }
+}
+
 // A position drive holds a rod where its spring balances gravity's torque: the angle theta
 // with ks (theta* - theta) = m g d sin(theta), solved here by bisection
 TEST(Joints, PositionDriveBalancesGravity) {
