@@ -36,6 +36,7 @@ class SphereDistance final : public SignedDistance {
   double phi(const Vec3& p) const override;
   double phi_and_normal(const Vec3& p, Vec3& normal) const override;
   Box3 bounds() const override;
+  double radius() const { return radius_; }  // (m)
 
  private:
   double radius_;  // (m)

@@ -40,6 +40,7 @@ class NarrowPhase {
   long long sweep_tests(int a, int b) const;
   void find_penetrations(int a, int b, double margin, long long tests, std::vector<Penetration>& out) const;
   bool box_pair_contact(int a, int b, double s, double margin, std::vector<Penetration>& out) const;
+  bool sphere_contact(int a, int b, double margin, std::vector<Penetration>& out) const;
   double contact_margin(int a, int b) const;
 
  private:
@@ -245,6 +246,43 @@ bool NarrowPhase::box_pair_contact(int a, int b, double s, double margin, std::v
   return true;
 }
 
+// A sphere (body a, its shape an exact sphere about its mesh origin) against the ground or
+// body b: one point, the sphere's point nearest b's surface, c - r n, with b's normal n and
+// distance at the centre c (at the candidates). Vertices as samples make a ball a polyhedron,
+// which rolls from face to face and loses a third of its speed a second so (a ball rolling
+// at 1 m/s on the ground kept 0.37 m/s after 3 s). Exact for the ground, a box or a sphere
+// (b's distance is exact out to the centre), and for a convex level set within its band;
+// false (the samples then) when the centre is inside b or beyond b's band, or the sphere is
+// deeper than is trusted. True when found here (its point appended, if near enough).
+bool NarrowPhase::sphere_contact(int a, int b, double margin, std::vector<Penetration>& out) const {
+  const RigidBodyDef& def = model_.defs[a];
+  if (def.sphere == nullptr) return false;
+  const double r = def.sphere->radius();
+  const Pose& pose_a = scratch_.candidate_poses[a];
+  const Vec3& centre = pose_a.translation;
+  double at_centre;
+  Vec3 n;
+  if (b == kGround) {
+    at_centre = centre.y() - model_.ground->height;
+    n = Vec3::UnitY();
+  } else {
+    const SignedDistance& shape = *model_.defs[b].shape;
+    const Pose pose_b = pose_at(b, 1.0);
+    Vec3 n_local;
+    at_centre = shape.phi_and_normal(pose_b.apply_inverse(centre), n_local);
+    if (at_centre <= 0.0 || at_centre >= shape.exterior_reach()) return false;
+    n = pose_b.rotation * n_local;
+  }
+  const double phi = at_centre - r;
+  const double thinner = b == kGround ? def.thickness : std::min(def.thickness, model_.defs[b].thickness);
+  if (-phi > kTrustedDepth * thinner) return false;
+  // (touching is not penetrating, as for the samples; within the margin outside: speculative)
+  if (phi >= margin || std::abs(phi) <= kTouching) return true;
+  const Vec3 x = centre - r * n;
+  out.push_back({a, b, x, n, phi, pose_a.apply_inverse(x), 1.0});
+  return true;
+}
+
 // Body i's K at world point x, lever arm from its candidate centre of mass; zero for the
 
 // as impulses land: a box resting on a falling box, both at the same velocity, touches
@@ -301,8 +339,11 @@ void find_pair_penetrations(const RigidModel& model, const RigidData& data, Rigi
     const long long tests = narrow.sweep_tests(a, b);  // (the same both ways)
     scratch.single_test[k] = tests == 1;
     if (tests == 1 && narrow.box_pair_contact(a, b, 1.0, margin, out[k])) return;
-    narrow.find_penetrations(a, b, margin, tests, out[k]);
-    if (b != kGround) narrow.find_penetrations(b, a, margin, tests, out[k]);
+    // a sphere by its nearest point (two spheres: once, for the pair)
+    const bool a_sphere = tests == 1 && narrow.sphere_contact(a, b, margin, out[k]);
+    if (!a_sphere) narrow.find_penetrations(a, b, margin, tests, out[k]);
+    if (b == kGround || (a_sphere && model.defs[b].sphere != nullptr)) return;
+    if (!(tests == 1 && narrow.sphere_contact(b, a, margin, out[k]))) narrow.find_penetrations(b, a, margin, tests, out[k]);
   });
 }
 

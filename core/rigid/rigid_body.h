@@ -58,6 +58,7 @@ struct RigidBodyDef {
   SignedDistancePtr shape;                   // signed distance in mesh coordinates; null when
                                              // nothing can touch the body (no grid baked)
   const BoxDistance* box = nullptr;          // the shape when it is a box (exact box contacts)
+  const SphereDistance* sphere = nullptr;    // the shape when it is a sphere (exact sphere contacts)
   Points samples;                            // (s x 3) surface samples in mesh coordinates (m)
   std::vector<SampleBlock> sample_blocks;    // (ceil(s / 8)) their bounding spheres, in order
   double bounding_radius = 0.0;              // largest |sample - center| (m)

@@ -49,6 +49,7 @@ RigidBodyDef make_body_def(const BodyDesc& desc) {
   def.restitution = desc.restitution;
   def.shape = desc.shape;
   def.box = dynamic_cast<const BoxDistance*>(def.shape.get());
+  def.sphere = dynamic_cast<const SphereDistance*>(def.shape.get());
   def.samples = desc.samples;
   def.sample_blocks = sample_blocks(def.samples);
   def.center = desc.unit_mass.center;
