@@ -274,6 +274,25 @@ struct ComponentSolver {
     return worst;
   }
 
+  // The LU of A: its pattern analysed again only when it differs from the last one's (the
+  // ordering depends on the pattern alone, so the factors are the same bits either way)
+  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>& factor(const Eigen::SparseMatrix<double>& A) {
+    const int* outer = A.outerIndexPtr();
+    const int* inner = A.innerIndexPtr();
+    const bool same = c.lu && static_cast<Eigen::Index>(c.pattern_outer.size()) == A.outerSize() + 1 &&
+                      static_cast<Eigen::Index>(c.pattern_inner.size()) == A.nonZeros() &&
+                      std::equal(c.pattern_outer.begin(), c.pattern_outer.end(), outer) &&
+                      std::equal(c.pattern_inner.begin(), c.pattern_inner.end(), inner);
+    if (!same) {
+      if (!c.lu) c.lu = std::make_unique<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>>();
+      c.lu->analyzePattern(A);
+      c.pattern_outer.assign(outer, outer + A.outerSize() + 1);
+      c.pattern_inner.assign(inner, inner + A.nonZeros());
+    }
+    c.lu->factorize(A);
+    return *c.lu;
+  }
+
   // A dlambda = residual over the active rows, solved and applied within the rows' bounds
   void solve(bool first) {
     const int m = static_cast<int>(c.active.size());
@@ -318,8 +337,8 @@ struct ComponentSolver {
     for (int attempt = 0; attempt <= m; ++attempt) {
       Eigen::SparseMatrix<double> A(m, m);
       A.setFromTriplets(entries.begin(), entries.end());
-      Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu;
-      lu.compute(A);
+      A.makeCompressed();
+      auto& lu = factor(A);
       if (lu.info() != Eigen::Success) return;
       delta = lu.solve(b);
       if (!delta.allFinite()) return;

@@ -4,6 +4,10 @@
 
 #include "rigid/joint_rows.h"
 
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
+
+#include <memory>
 #include <vector>
 
 namespace simbake {
@@ -24,6 +28,10 @@ struct JointComponent {
   std::vector<Vec3> saved_v, saved_l;  // (nlocal) velocities at the best iterate so far
   std::vector<double> saved_impulse;  // (nrow) and the rows' impulses
   std::vector<double> step;           // (nrow) the last Newton step's impulses
+  // the sparse LU of the last solve and the pattern it was analysed for: a system with the
+  // same pattern (the same active rows, most iterations and steps) is only factored again
+  std::unique_ptr<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>> lu;
+  std::vector<int> pattern_outer, pattern_inner;
 };
 
 struct JointScratch {
