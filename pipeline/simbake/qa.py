@@ -1,7 +1,8 @@
 """Quality figures of a bake, frame by frame: what a render would show wrong, in numbers.
 
 The driver hands each written frame's world to :class:`QualityRecorder`, which asks the core
-for the figures (``World.quality()``, measured apart from the solver: core/world/quality.h)
+for the figures (a ``QualityMeter``: ``World.quality()`` measured again only where something
+can have changed; measured apart from the solver: core/world/quality.h)
 and keeps them with the frame's substeps, wall time and kinetic energy. At the end they go
 into a sidecar ``CACHE.qa.json`` (written whole or not at all), a summary into the cache's
 ``customLayerData["simbake"]["qa"]``, and one warning line per figure that crossed its
@@ -124,6 +125,7 @@ class QualityRecorder:
             + (("joint_error", "joint_error_joint") if scene.joints else ())}
         self.joint_names = [j.name for j in scene.joints]
         self._fallbacks = 0  # the fallbacks counted up to the last recorded frame
+        self._meter = None   # the core's QualityMeter, made at the first frame
         self.cloths: dict[str, dict[str, list]] = {
             name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
                    "edge_penetration": []} for name in self.cloth_names}
@@ -136,7 +138,11 @@ class QualityRecorder:
     def record(self, frame: int, world, substeps: int, wall_seconds: float, origins=None) -> None:
         """The figures of `world` as it is now, written as `frame`; `origins` (bodies, 3): the
         bodies' mesh origins (m), for the motion figures."""
-        quality = world.quality()
+        if self._meter is None:
+            from . import _core  # (the compiled core loads with the world, not with this module)
+
+            self._meter = _core.QualityMeter()
+        quality = self._meter.measure(world)
         self.frames.append(frame)
         f = self.figures
         f["substeps"].append(int(substeps))
@@ -285,7 +291,7 @@ class QualityRecorder:
             "cache": cache.name,
             "cache_sha256": cache_sha256,
             "scene": {"path": str(self.scene.path), "sha256": self.scene.hash(),
-                      "settings": _plain(dataclasses.asdict(self.scene))},
+                      "settings": _plain(self.scene)},
             "thresholds": self.thresholds,
             "frames": self.frames,
             "time": [(f - self.scene.start_frame) / self.scene.fps for f in self.frames],
@@ -329,7 +335,10 @@ def _show(value: float, unit: str, scale: float) -> str:
 
 
 def _plain(value: Any) -> Any:
-    """Scene settings as JSON: paths as strings, tuples as lists, non-finite floats as strings."""
+    """Scene settings as JSON: dataclasses as dicts of their fields (dataclasses.asdict's
+    without its deep copies), paths as strings, tuples as lists, non-finite floats as strings."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
