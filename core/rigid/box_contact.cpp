@@ -159,12 +159,6 @@ bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& ou
   return true;
 }
 
-double box_face_overlap(const OrientedBox& a, const OrientedBox& b) {
-  double least = INFINITY;
-  for (int k = 0; k < 6; ++k) least = std::min(least, projected_overlap(a, b, k < 3 ? a.rotation.col(k) : b.rotation.col(k - 3)));
-  return least;
-}
-
 double box_overlap_depth(const OrientedBox& a, const OrientedBox& b) {
   AxisSearch axes;
   if (!search_axes(a, b, 0.0, axes)) return 0.0;

@@ -56,12 +56,6 @@ bool box_edge_contact(const OrientedBox& a, const OrientedBox& b, double margin,
 // shortest translation that separates them), 0 when apart (m)
 double box_overlap_depth(const OrientedBox& a, const OrientedBox& b);
 
-// The least overlap of the boxes' projections on their 6 face axes alone (m; negative: apart
-// by that much): never below box_overlap_depth, nor below how deep any point of one box is
-// inside the other (that depth is at most the shortest separating translation, which is at
-// most the overlap along any axis). A bound for pruning, computed as search_axes computes it.
-double box_face_overlap(const OrientedBox& a, const OrientedBox& b);
-
 // The box of a box shape (BoxDistance, centred at its mesh origin) at a mesh pose; false for
 // any other shape
 bool oriented_box(const SignedDistance* shape, const Pose& pose, OrientedBox& out);

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <numeric>
 #include <stdexcept>
@@ -45,6 +46,8 @@ void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses
 struct Candidate {
   int a = -1, b = -1;   // b = -1: the ground
   double bound = 0.0;   // no depth of this candidate exceeds it (m)
+  std::uint64_t order;  // its place in the figure's order: the ground's by body, then the
+                        // pairs by the sweep's ranks of their earlier and later body
 };
 
 // Where one body is now, and what bounds its samples' depths (its extent)
@@ -80,45 +83,151 @@ double ground_bound(double height, const BodyReach& a) {
   return height - (a.pose.translation.y() - a.extent.samples) + kBoundSlack;
 }
 
-// The deepest any sample of either body can be inside the other (and, two boxes, their
-// overlap). A point of one box inside another is no deeper than the boxes' overlap along any
-// axis; a point within `samples` of one mesh origin and inside a solid that lies within
-// `solid` of the other origin is no deeper than samples + solid - the origins' distance.
+// The least overlap of two boxes' projections on their 6 face axes (m; negative: apart by
+// that much). Two boxes' SAT depth is at most this (it is the least over these axes and
+// more), and so is how deep any point of one is inside the other (at most the shortest
+// translation that separates them, itself at most the overlap along any axis). With
+// C = Ra^T Rb, a's face axis i projects b to sum_k hb_k |C_ik|, b's axis j a to sum_k ha_k |C_kj|.
+double face_overlap(const OrientedBox& a, const OrientedBox& b) {
+  const Mat3 C = a.rotation.transpose() * b.rotation;
+  const Vec3 d = b.center - a.center;
+  const Vec3 da = a.rotation.transpose() * d, db = b.rotation.transpose() * d;
+  double least = INFINITY;
+  for (int i = 0; i < 3; ++i) {
+    least = std::min(least, a.half[i] + b.half.dot(C.row(i).cwiseAbs().transpose()) - std::abs(da[i]));
+    least = std::min(least, b.half[i] + a.half.dot(C.col(i).cwiseAbs()) - std::abs(db[i]));
+  }
+  return least;
+}
+
+// The deepest any sample of either body can be inside the other (and, two boxes, their SAT
+// depth): for two boxes their face overlap; else a point within `samples` of one mesh origin
+// and inside a solid that lies within `solid` of the other origin is no deeper than
+// samples + solid - the origins' distance. Negative: apart, every depth <= 0 (a figure counts
+// only depths > 0; two boxes' SAT depth is 0 when they are apart).
 double pair_bound(const BodyReach& a, const BodyReach& b) {
   if (!a.finite || !b.finite) return INFINITY;
   const BodyExtent &ea = a.extent, &eb = b.extent;
-  const double overlap = ea.is_box && eb.is_box ? std::max(box_face_overlap(a.box, b.box), 0.0) : 0.0;
+  const double overlap = ea.is_box && eb.is_box ? face_overlap(a.box, b.box) : -INFINITY;
   if (ea.samples_in_box && eb.samples_in_box) return overlap + kBoundSlack;
   const double apart = (a.pose.translation - b.pose.translation).norm();
   return std::max(overlap, std::max(ea.samples + eb.solid, eb.samples + ea.solid) - apart) + kBoundSlack;
 }
 
-// The candidates of the body figure, in its order, with their bounds
-std::vector<Candidate> candidates(const World& w, const std::vector<BodyReach>& reach) {
+// Whether the bounding spheres of bodies i and j meet (i the earlier in the sweep's order)
+bool spheres_meet(const World& w, int i, int j) {
+  return !((w.rigid_data().x[j] - w.rigid_data().x[i]).norm() > w.body_def(i).bounding_radius + w.body_def(j).bounding_radius);
+}
+
+// The pairs whose bounding spheres meet, each as (i, j) with i before j in `order` (the
+// bodies sorted by the low end of their spheres along x), in the order a sweep along x
+// passes them: every body against the ones after it whose spheres start before its own ends.
+// A sweep passes the bodies in the same slab of x: O(n^2) for a pile as wide as it is high.
+std::vector<std::array<int, 2>> pairs_by_sweep(const World& w, const std::vector<int>& order) {
+  const int n = w.body_count();
+  const auto low = [&w](int i) { return w.rigid_data().x[i].x() - w.body_def(i).bounding_radius; };
+  std::vector<std::array<int, 2>> out;
+  for (int p = 0; p < n; ++p) {
+    const int i = order[p];
+    const double high = w.rigid_data().x[i].x() + w.body_def(i).bounding_radius;
+    for (int q = p + 1; q < n && low(order[q]) <= high; ++q) {
+      if (spheres_meet(w, i, order[q])) out.push_back({i, order[q]});
+    }
+  }
+  return out;
+}
+
+// The same pairs (each as the sweep has it; in no particular order) from a grid of cubes as wide as the largest sphere of most
+// bodies (the widest tenth, if much wider, is checked against every body), each body against
+// the bodies in its cube and the 26 around it: a pair of spheres that meet is at most one
+// cube apart on each axis (a sphere that meets another only within round-off of touching may
+// be counted here and not by the sweep: it holds no depth). false (and nothing) when the
+// bodies do not suit a grid (positions not finite, too many wide bodies).
+bool pairs_by_grid(const World& w, const std::vector<int>& rank, std::vector<std::array<int, 2>>& out) {
+  const int n = w.body_count();
+  if (n < 2) return true;  // (no pairs)
+  std::vector<double> radii(n);
+  for (int i = 0; i < n; ++i) {
+    radii[i] = w.body_def(i).bounding_radius;
+    if (!w.rigid_data().x[i].allFinite() || !std::isfinite(radii[i])) return false;
+  }
+  std::vector<double> sorted = radii;
+  const auto tenth = sorted.begin() + (9 * static_cast<std::ptrdiff_t>(n)) / 10;
+  std::nth_element(sorted.begin(), tenth, sorted.end());
+  const double cube = 2.0 * *tenth * (1.0 + 1e-6);  // (a margin over the round-off of x / cube)
+  if (!(cube > 0.0)) return false;
+  // each cube as one key, 21 bits an axis: the cubes of a row along z are consecutive keys
+  constexpr std::int64_t kSpan = std::int64_t{1} << 20;
+  const auto key = [](std::int64_t cx, std::int64_t cy, std::int64_t cz) {
+    return static_cast<std::uint64_t>(((cx + kSpan) << 42) | ((cy + kSpan) << 21) | (cz + kSpan));
+  };
+  std::vector<int> wide;
+  std::vector<std::array<std::int64_t, 3>> cells(n);
+  std::vector<std::pair<std::uint64_t, int>> entries;  // (cube, body), sorted
+  for (int i = 0; i < n; ++i) {
+    if (2.0 * radii[i] > cube) {
+      wide.push_back(i);
+      continue;
+    }
+    const Vec3 c = w.rigid_data().x[i] / cube;
+    if (c.cwiseAbs().maxCoeff() > static_cast<double>(kSpan - 2)) return false;
+    cells[i] = {static_cast<std::int64_t>(std::floor(c.x())), static_cast<std::int64_t>(std::floor(c.y())),
+                static_cast<std::int64_t>(std::floor(c.z()))};
+    entries.push_back({key(cells[i][0], cells[i][1], cells[i][2]), i});
+  }
+  if (wide.size() > 64) return false;
+  std::sort(entries.begin(), entries.end());
+  const auto add = [&](int i, int j) {  // i and j in either order
+    if (rank[j] < rank[i]) std::swap(i, j);
+    if (spheres_meet(w, i, j)) out.push_back({i, j});
+  };
+  for (const auto& [own, i] : entries) {
+    const auto& c = cells[i];
+    for (std::int64_t dx = -1; dx <= 1; ++dx) {
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        const std::uint64_t last = key(c[0] + dx, c[1] + dy, c[2] + 1);
+        auto it = std::lower_bound(entries.begin(), entries.end(), std::make_pair(key(c[0] + dx, c[1] + dy, c[2] - 1), -1));
+        for (; it != entries.end() && it->first <= last; ++it) {
+          if (rank[it->second] > rank[i]) add(i, it->second);
+        }
+      }
+    }
+  }
+  for (size_t k = 0; k < wide.size(); ++k) {
+    for (int j = 0; j < n; ++j) {
+      const bool wide_j = 2.0 * radii[j] > cube;
+      if (j != wide[k] && (!wide_j || rank[j] > rank[wide[k]])) add(wide[k], j);
+    }
+  }
+  return true;
+}
+
+// The candidates of the body figure with their bounds and places in its order (pairs from a
+// grid, or with `sweep` as the figure defines them, in its order)
+std::vector<Candidate> candidates(const World& w, const std::vector<BodyReach>& reach, bool sweep = false) {
   const int n = w.body_count();
   std::vector<Candidate> out;
   if (w.ground()) {
     for (int a = 0; a < n; ++a) {
-      if (!w.body_def(a).kinematic) out.push_back({a, -1, ground_bound(w.ground()->height, reach[a])});
+      if (!w.body_def(a).kinematic) out.push_back({a, -1, ground_bound(w.ground()->height, reach[a]), std::uint64_t(a)});
     }
   }
-  std::vector<int> order(n);
+  std::vector<int> order(n), rank(n);
+  std::vector<double> low(n);  // the low end of each body's sphere along x
+  for (int i = 0; i < n; ++i) low[i] = w.rigid_data().x[i].x() - w.body_def(i).bounding_radius;
   std::iota(order.begin(), order.end(), 0);
-  const auto low = [&w](int i) { return w.rigid_data().x[i].x() - w.body_def(i).bounding_radius; };
-  std::stable_sort(order.begin(), order.end(), [&](int i, int j) { return low(i) < low(j); });
-  for (int p = 0; p < n; ++p) {
-    const int i = order[p];
-    const Vec3& xi = w.rigid_data().x[i];
-    const double ri = w.body_def(i).bounding_radius;
-    for (int q = p + 1; q < n && low(order[q]) <= xi.x() + ri; ++q) {
-      const int j = order[q];
-      if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
-      if ((w.rigid_data().x[j] - xi).norm() > ri + w.body_def(j).bounding_radius) continue;
-      // (a pair kept from colliding, jointed or filtered, may overlap)
-      if (w.rigid_model().filters_collisions() && collision_filtered(w.rigid_model(), w.rigid_data(), i, j)) continue;
-      const bool i_first = !w.body_def(i).kinematic;
-      out.push_back({i_first ? i : j, i_first ? j : i, pair_bound(reach[i], reach[j])});
-    }
+  std::stable_sort(order.begin(), order.end(), [&low](int i, int j) { return low[i] < low[j]; });
+  for (int p = 0; p < n; ++p) rank[order[p]] = p;
+  std::vector<std::array<int, 2>> pairs;
+  if (sweep || !pairs_by_grid(w, rank, pairs)) pairs = pairs_by_sweep(w, order);
+  for (const auto& [i, j] : pairs) {
+    if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
+    // (a pair kept from colliding, jointed or filtered, may overlap)
+    if (w.rigid_model().filters_collisions() && collision_filtered(w.rigid_model(), w.rigid_data(), i, j)) continue;
+    const bool i_first = !w.body_def(i).kinematic;
+    const std::uint64_t order = (std::uint64_t{1} << 63) | (static_cast<std::uint64_t>(rank[i]) << 31) |
+                                static_cast<std::uint64_t>(rank[j]);
+    out.push_back({i_first ? i : j, i_first ? j : i, pair_bound(reach[i], reach[j]), order});
   }
   return out;
 }
@@ -176,7 +285,7 @@ PenetrationFigure body_penetration_every_sample(const World& w) {
   std::vector<Pose> poses(n);
   for (int i = 0; i < n; ++i) poses[i] = w.body_mesh_pose(i);
   PenetrationFigure deepest;
-  for (const Candidate& c : candidates(w, reach)) {
+  for (const Candidate& c : candidates(w, reach, true)) {
     const PenetrationFigure d = candidate_depth(w, c, poses);
     offer(deepest, d.depth, d.a, d.b);
   }
@@ -185,7 +294,8 @@ PenetrationFigure body_penetration_every_sample(const World& w) {
 
 // The candidates deepest bound first: once a bound is below the deepest depth found, no
 // later candidate can be deeper (nor tie: a tie goes to the candidate first in the figure's
-// order, so a candidate whose bound equals the deepest is still measured)
+// order, so a candidate whose bound equals the deepest is still measured, and the first of
+// the deepest is kept whatever the order they were measured in)
 PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>& extents) {
   const int n = w.body_count();
   std::vector<BodyReach> reach(n);
@@ -195,18 +305,24 @@ PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>
     poses[i] = reach[i].pose;
   }
   const std::vector<Candidate> all = candidates(w, reach);
-  std::vector<int> order(all.size());
-  std::iota(order.begin(), order.end(), 0);
-  const auto bound = [&all](int k) { return std::isnan(all[k].bound) ? INFINITY : all[k].bound; };
-  std::stable_sort(order.begin(), order.end(), [&](int i, int j) { return bound(i) > bound(j); });
+  // the candidates that may hold a depth (> 0), as a heap by bound: every candidate whose
+  // bound is not below the final deepest depth is measured, in whatever order they come
+  std::vector<std::pair<double, int>> heap;
+  for (int k = 0; k < static_cast<int>(all.size()); ++k) {
+    const double bound = std::isnan(all[k].bound) ? INFINITY : all[k].bound;
+    if (bound > 0.0) heap.push_back({bound, k});
+  }
+  std::make_heap(heap.begin(), heap.end());
   PenetrationFigure deepest;
-  int first = -1;  // the candidate that gave `deepest`
-  for (int k : order) {
-    if (!(bound(k) > 0.0) || bound(k) < deepest.depth) break;
+  std::uint64_t first = 0;  // the place of the candidate that gave `deepest`
+  while (!heap.empty() && !(heap.front().first < deepest.depth)) {
+    const int k = heap.front().second;
+    std::pop_heap(heap.begin(), heap.end());
+    heap.pop_back();
     const PenetrationFigure d = candidate_depth(w, all[k], poses);
-    if (d.depth > deepest.depth || (d.a >= 0 && d.depth == deepest.depth && k < first)) {
+    if (d.depth > deepest.depth || (d.a >= 0 && d.depth == deepest.depth && all[k].order < first)) {
       deepest = d;
-      first = k;
+      first = all[k].order;
     }
   }
   return deepest;

@@ -81,6 +81,7 @@ MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
 FALLBACKS = ("cloth_held_still", "self_collision_over_budget", "impact_zone_yields", "cloth_let_in", "cloth_gave")
 
 
+_SETTINGS = "simbake:settings"  # where the scene's settings go into the sidecar's text
 _MOTION = ("energy_gain", "unexplained_stop", "unexplained_stop_body", "imparted_speed", "imparted_speed_body")
 
 
@@ -308,7 +309,12 @@ class QualityRecorder:
         path = qa_path(cache)
         staged = outputs.staged(cache) if outputs is not None else None
         digest = sha256_of(staged if staged is not None else cache)
-        text = json.dumps(self.as_dict(cache, profile, digest), indent=1, allow_nan=False)
+        data = self.as_dict(cache, profile, digest)
+        # the scene's settings (a line for every body of a pile) on one line: indented JSON is
+        # written by Python's slow encoder, compact JSON by its fast one
+        settings, data["scene"]["settings"] = data["scene"]["settings"], _SETTINGS
+        text = json.dumps(data, indent=1, allow_nan=False)
+        text = text.replace(json.dumps(_SETTINGS), json.dumps(settings, allow_nan=False), 1)
 
         def write(tmp: str) -> None:
             Path(tmp).write_text(text + "\n")

@@ -149,13 +149,14 @@ class MotionFigures:
         up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
         if self.ground is not None and float(here[0] @ up) - r - self.ground <= CLEAR_GAP:
             return False
-        others = np.delete(np.arange(len(origins)), body)
-        if len(others):
+        if len(origins) > 1:
             # a body within the gap where it ends the frame is within it along its path too
             # (the path's distance is at most the end's; the margin covers round-off)
-            ends = np.linalg.norm(origins[others] - here, axis=1) - r - self.radii[others]
+            ends = np.linalg.norm(origins - here, axis=1) - r - self.radii
+            ends[body] = np.inf
             if ends.min() <= CLEAR_GAP - _ROUND_OFF:
                 return False
+            others = np.delete(np.arange(len(origins)), body)
             gaps = _segment_distance(here, self._origins[others], origins[others])[0] - r - self.radii[others]
             if gaps.min() <= CLEAR_GAP:
                 return False

@@ -165,6 +165,43 @@ TEST(Quality, PrunedFigureIsEverySamplesFigureBitForBit) {
   }
 }
 
+TEST(Quality, GridOfPairsIsTheSweepsBitForBit) {
+  // a tilted grid of boxes falling onto a wide kinematic slab and onto one another (the pairs
+  // come from the grid of cubes, the slab against every body): the same figure as the sweep's
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  World world;
+  world.set_ground(GroundDef{});
+  BodyDesc slab = box_body(Vec3(8, 0.2, 8), 1.0, Vec3(0, 0.1, 0));
+  slab.kinematic = true;
+  world.add_body(slab);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 4; ++j)
+      for (int k = 0; k < 6; ++k) {
+        BodyDesc d = box_body(Vec3(0.5, 0.5, 0.5), 1.0, Vec3(0.52 * i - 1.5, 0.3 + 0.52 * j, 0.52 * k - 1.5), 2);
+        d.orientation = Quat(1.0, 0.1 * unit(rng), 0.1 * unit(rng), 0.1 * unit(rng)).normalized();
+        world.add_body(d);
+      }
+  for (int frame = 0; frame < 24; ++frame) {
+    const PenetrationFigure every = body_penetration_every_sample(world);
+    const PenetrationFigure pruned = body_penetration(world);
+    EXPECT_EQ(std::memcmp(&pruned.depth, &every.depth, sizeof every.depth), 0) << "frame " << frame;
+    EXPECT_EQ(pruned.a, every.a);
+    EXPECT_EQ(pruned.b, every.b);
+    world.step_frame(1.0 / 24.0, 4);
+  }
+}
+
+TEST(Quality, NoBodyOrOneBodyHasNoPair) {
+  World world;
+  QualityMeter meter;
+  EXPECT_EQ(meter.measure(world).body_penetration.a, -1);
+  world.set_ground(GroundDef{});
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(0, 0.49, 0)));
+  EXPECT_NEAR(meter.measure(world).body_penetration.depth, 0.01, 1e-12);
+  EXPECT_NEAR(body_penetration(world).depth, 0.01, 1e-12);
+}
+
 TEST(Quality, MeterKeepsTheFigureOnlyWhileNothingMoves) {
   World world;
   world.set_ground(GroundDef{});
