@@ -696,4 +696,16 @@ PYBIND11_MODULE(_core, m) {
   bind_world_building(world);
   bind_world_stepping(world);
   bind_world_reading(world);
+  py::class_<QualityMeter>(m, "QualityMeter",
+                           "World.quality() frame after frame, measuring only what can have changed "
+                           "(world/quality.h): the same figures, bit for bit")
+      .def(py::init<>())
+      .def("measure", [](QualityMeter& meter, const World& w) {
+             FrameQuality q;
+             {
+               py::gil_scoped_release release;
+               q = meter.measure(w);
+             }
+             return quality_dict(q);
+           }, py::arg("world"));
 }

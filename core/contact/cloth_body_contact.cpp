@@ -38,6 +38,7 @@ constexpr int kGround = -1;                // a contact's body index for the gro
 constexpr double kPinchSpeed = 0.25;       // (m/s) the most a pinch pushes its two surfaces apart per step
 constexpr double kPinchGap = 3.0;          // x h: the least gap a pinch holds open (two layers)
 constexpr double kPinchReach = 6.0;        // x h: the widest gap looked at for layers (up to 5)
+constexpr double kWorldBoxSlack = 1e-6;    // (m) a body's world box grown past round-off
 constexpr int kPinchSweeps = 4;            // Gauss-Seidel sweeps of the pinches' impulses
 constexpr double kEdgeReach = 2.0;         // x h: a cloth edge inside a body within this of a body edge went over it
 constexpr double kMaxLever = 4.0;         // a contact moves no cloth vertex faster than this many times its
@@ -447,10 +448,16 @@ void ClothBodyContact::collide_with_body(Cloth& cloth, ContactBodies& bodies, in
   local.max().array() += h;
   if (out_of_reach(body, reach, h)) return;
   const double mu = surface_friction(bodies, b);
+  // the world box of `local` at the pose (grown by far more than round-off): a point outside
+  // it is outside `local` in the body's frame, told without turning it into that frame
+  const Vec3 centre = pose.apply(local.center()), half = 0.5 * local.sizes();
+  const Vec3 spread = pose.rotation.cwiseAbs() * half + Vec3::Constant(kWorldBoxSlack);
+  const Box3 around(centre - spread, centre + spread);
   bool touched = false;
   for (int k = 0; k < n; ++k) {
     if (pinned[k]) continue;
     const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+    if (!around.contains(xc)) continue;
     const Vec3 p = pose.apply_inverse(xc);
     if (!local.contains(p)) continue;
     Vec3 n_local;
@@ -466,6 +473,7 @@ void ClothBodyContact::collide_with_body(Cloth& cloth, ContactBodies& bodies, in
     const Vec3 d = (x.row(e[1]) + dt * v.row(e[1])).transpose() - a;
     for (double s : {0.25, 0.5, 0.75}) {
       const Vec3 xc = a + s * d;
+      if (!around.contains(xc)) continue;
       const Vec3 p = pose.apply_inverse(xc);
       if (!local.contains(p)) continue;
       Vec3 n_local;

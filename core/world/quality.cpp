@@ -3,8 +3,12 @@
 #include "geometry/triangle_intersection.h"
 #include "rigid/box_contact.h"
 #include "rigid/collision_filter.h"
+#include "levelset/signed_distance.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <numeric>
 #include <stdexcept>
 #include <utility>
@@ -36,43 +40,289 @@ void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses
   }
 }
 
-}  // namespace
+// Every candidate of the body figure, in the order the figure is defined by: each dynamic
+// body against the ground, then the pairs whose bounding spheres meet, in a sweep along x
+// (the first of a pair a dynamic body, so that on a tie it is named as the one inside)
+struct Candidate {
+  int a = -1, b = -1;   // b = -1: the ground
+  double bound = 0.0;   // no depth of this candidate exceeds it (m)
+  std::uint64_t order;  // its place in the figure's order: the ground's by body, then the
+                        // pairs by the sweep's ranks of their earlier and later body
+};
 
-PenetrationFigure body_penetration(const World& w) {
+// Where one body is now, and what bounds its samples' depths (its extent)
+struct BodyReach {
+  Pose pose;
+  bool finite = true;
+  OrientedBox box;  // (extent.is_box)
+  BodyExtent extent;
+};
+
+// Depths and bounds are both computed in floating point from coordinates of a few metres:
+// a bound this much above its exact value (m) stays above every depth it bounds
+constexpr double kBoundSlack = 1e-6;
+
+BodyReach body_reach(const World& w, int i, const BodyExtent& extent) {
+  BodyReach r;
+  r.pose = w.body_mesh_pose(i);
+  r.finite = r.pose.rotation.allFinite() && r.pose.translation.allFinite();
+  r.extent = extent;
+  if (extent.is_box) r.box = {r.pose.translation, r.pose.rotation, extent.half};
+  return r;
+}
+
+// The deepest any sample of body a can be under the ground: its box's lowest corner, or its
+// mesh origin less the samples' reach
+double ground_bound(double height, const BodyReach& a) {
+  if (!a.finite) return INFINITY;
+  if (a.extent.samples_in_box) {
+    const Mat3& R = a.box.rotation;
+    const double reach = a.box.half.dot(Vec3(std::abs(R(1, 0)), std::abs(R(1, 1)), std::abs(R(1, 2))));
+    return height - (a.box.center.y() - reach) + kBoundSlack;
+  }
+  return height - (a.pose.translation.y() - a.extent.samples) + kBoundSlack;
+}
+
+// The least overlap of two boxes' projections on their 6 face axes (m; negative: apart by
+// that much). Two boxes' SAT depth is at most this (it is the least over these axes and
+// more), and so is how deep any point of one is inside the other (at most the shortest
+// translation that separates them, itself at most the overlap along any axis). With
+// C = Ra^T Rb, a's face axis i projects b to sum_k hb_k |C_ik|, b's axis j a to sum_k ha_k |C_kj|.
+double face_overlap(const OrientedBox& a, const OrientedBox& b) {
+  const Mat3 C = a.rotation.transpose() * b.rotation;
+  const Vec3 d = b.center - a.center;
+  const Vec3 da = a.rotation.transpose() * d, db = b.rotation.transpose() * d;
+  double least = INFINITY;
+  for (int i = 0; i < 3; ++i) {
+    least = std::min(least, a.half[i] + b.half.dot(C.row(i).cwiseAbs().transpose()) - std::abs(da[i]));
+    least = std::min(least, b.half[i] + a.half.dot(C.col(i).cwiseAbs()) - std::abs(db[i]));
+  }
+  return least;
+}
+
+// The deepest any sample of either body can be inside the other (and, two boxes, their SAT
+// depth): for two boxes their face overlap; else a point within `samples` of one mesh origin
+// and inside a solid that lies within `solid` of the other origin is no deeper than
+// samples + solid - the origins' distance. Negative: apart, every depth <= 0 (a figure counts
+// only depths > 0; two boxes' SAT depth is 0 when they are apart).
+double pair_bound(const BodyReach& a, const BodyReach& b) {
+  if (!a.finite || !b.finite) return INFINITY;
+  const BodyExtent &ea = a.extent, &eb = b.extent;
+  const double overlap = ea.is_box && eb.is_box ? face_overlap(a.box, b.box) : -INFINITY;
+  if (ea.samples_in_box && eb.samples_in_box) return overlap + kBoundSlack;
+  const double apart = (a.pose.translation - b.pose.translation).norm();
+  return std::max(overlap, std::max(ea.samples + eb.solid, eb.samples + ea.solid) - apart) + kBoundSlack;
+}
+
+// Whether the bounding spheres of bodies i and j meet (i the earlier in the sweep's order)
+bool spheres_meet(const World& w, int i, int j) {
+  return !((w.rigid_data().x[j] - w.rigid_data().x[i]).norm() > w.body_def(i).bounding_radius + w.body_def(j).bounding_radius);
+}
+
+// The pairs whose bounding spheres meet, each as (i, j) with i before j in `order` (the
+// bodies sorted by the low end of their spheres along x), in the order a sweep along x
+// passes them: every body against the ones after it whose spheres start before its own ends.
+// A sweep passes the bodies in the same slab of x: O(n^2) for a pile as wide as it is high.
+std::vector<std::array<int, 2>> pairs_by_sweep(const World& w, const std::vector<int>& order) {
   const int n = w.body_count();
-  PenetrationFigure deepest;
-  std::vector<Pose> poses(n);
-  for (int i = 0; i < n; ++i) poses[i] = w.body_mesh_pose(i);
-  // dynamic bodies against the ground
-  if (w.ground()) {
-    const double height = w.ground()->height;
-    for (int a = 0; a < n; ++a) {
-      if (w.body_def(a).kinematic) continue;
-      const Points& samples = w.body_def(a).samples;
-      for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-        offer(deepest, height - poses[a].apply(samples.row(s).transpose()).y(), a, -1);
+  const auto low = [&w](int i) { return w.rigid_data().x[i].x() - w.body_def(i).bounding_radius; };
+  std::vector<std::array<int, 2>> out;
+  for (int p = 0; p < n; ++p) {
+    const int i = order[p];
+    const double high = w.rigid_data().x[i].x() + w.body_def(i).bounding_radius;
+    for (int q = p + 1; q < n && low(order[q]) <= high; ++q) {
+      if (spheres_meet(w, i, order[q])) out.push_back({i, order[q]});
+    }
+  }
+  return out;
+}
+
+// The same pairs (each as the sweep has it; in no particular order) from a grid of cubes as wide as the largest sphere of most
+// bodies (the widest tenth, if much wider, is checked against every body), each body against
+// the bodies in its cube and the 26 around it: a pair of spheres that meet is at most one
+// cube apart on each axis (a sphere that meets another only within round-off of touching may
+// be counted here and not by the sweep: it holds no depth). false (and nothing) when the
+// bodies do not suit a grid (positions not finite, too many wide bodies).
+bool pairs_by_grid(const World& w, const std::vector<int>& rank, std::vector<std::array<int, 2>>& out) {
+  const int n = w.body_count();
+  if (n < 2) return true;  // (no pairs)
+  std::vector<double> radii(n);
+  for (int i = 0; i < n; ++i) {
+    radii[i] = w.body_def(i).bounding_radius;
+    if (!w.rigid_data().x[i].allFinite() || !std::isfinite(radii[i])) return false;
+  }
+  std::vector<double> sorted = radii;
+  const auto tenth = sorted.begin() + (9 * static_cast<std::ptrdiff_t>(n)) / 10;
+  std::nth_element(sorted.begin(), tenth, sorted.end());
+  const double cube = 2.0 * *tenth * (1.0 + 1e-6);  // (a margin over the round-off of x / cube)
+  if (!(cube > 0.0)) return false;
+  // each cube as one key, 21 bits an axis: the cubes of a row along z are consecutive keys
+  constexpr std::int64_t kSpan = std::int64_t{1} << 20;
+  const auto key = [](std::int64_t cx, std::int64_t cy, std::int64_t cz) {
+    return static_cast<std::uint64_t>(((cx + kSpan) << 42) | ((cy + kSpan) << 21) | (cz + kSpan));
+  };
+  std::vector<int> wide;
+  std::vector<std::array<std::int64_t, 3>> cells(n);
+  std::vector<std::pair<std::uint64_t, int>> entries;  // (cube, body), sorted
+  for (int i = 0; i < n; ++i) {
+    if (2.0 * radii[i] > cube) {
+      wide.push_back(i);
+      continue;
+    }
+    const Vec3 c = w.rigid_data().x[i] / cube;
+    if (c.cwiseAbs().maxCoeff() > static_cast<double>(kSpan - 2)) return false;
+    cells[i] = {static_cast<std::int64_t>(std::floor(c.x())), static_cast<std::int64_t>(std::floor(c.y())),
+                static_cast<std::int64_t>(std::floor(c.z()))};
+    entries.push_back({key(cells[i][0], cells[i][1], cells[i][2]), i});
+  }
+  if (wide.size() > 64) return false;
+  std::sort(entries.begin(), entries.end());
+  const auto add = [&](int i, int j) {  // i and j in either order
+    if (rank[j] < rank[i]) std::swap(i, j);
+    if (spheres_meet(w, i, j)) out.push_back({i, j});
+  };
+  for (const auto& [own, i] : entries) {
+    const auto& c = cells[i];
+    for (std::int64_t dx = -1; dx <= 1; ++dx) {
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        const std::uint64_t last = key(c[0] + dx, c[1] + dy, c[2] + 1);
+        auto it = std::lower_bound(entries.begin(), entries.end(), std::make_pair(key(c[0] + dx, c[1] + dy, c[2] - 1), -1));
+        for (; it != entries.end() && it->first <= last; ++it) {
+          if (rank[it->second] > rank[i]) add(i, it->second);
+        }
       }
     }
   }
-  // pairs whose bounding spheres meet (sweep along x), each body's samples in the other
-  std::vector<int> order(n);
+  for (size_t k = 0; k < wide.size(); ++k) {
+    for (int j = 0; j < n; ++j) {
+      const bool wide_j = 2.0 * radii[j] > cube;
+      if (j != wide[k] && (!wide_j || rank[j] > rank[wide[k]])) add(wide[k], j);
+    }
+  }
+  return true;
+}
+
+// The candidates of the body figure with their bounds and places in its order (pairs from a
+// grid, or with `sweep` as the figure defines them, in its order)
+std::vector<Candidate> candidates(const World& w, const std::vector<BodyReach>& reach, bool sweep = false) {
+  const int n = w.body_count();
+  std::vector<Candidate> out;
+  if (w.ground()) {
+    for (int a = 0; a < n; ++a) {
+      if (!w.body_def(a).kinematic) out.push_back({a, -1, ground_bound(w.ground()->height, reach[a]), std::uint64_t(a)});
+    }
+  }
+  std::vector<int> order(n), rank(n);
+  std::vector<double> low(n);  // the low end of each body's sphere along x
+  for (int i = 0; i < n; ++i) low[i] = w.rigid_data().x[i].x() - w.body_def(i).bounding_radius;
   std::iota(order.begin(), order.end(), 0);
-  const auto low = [&w](int i) { return w.rigid_data().x[i].x() - w.body_def(i).bounding_radius; };
-  std::stable_sort(order.begin(), order.end(), [&](int i, int j) { return low(i) < low(j); });
-  for (int p = 0; p < n; ++p) {
-    const int i = order[p];
-    const Vec3& xi = w.rigid_data().x[i];
-    const double ri = w.body_def(i).bounding_radius;
-    for (int q = p + 1; q < n && low(order[q]) <= xi.x() + ri; ++q) {
-      const int j = order[q];
-      if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
-      if ((w.rigid_data().x[j] - xi).norm() > ri + w.body_def(j).bounding_radius) continue;
-      // (a pair kept from colliding, jointed or filtered, may overlap)
-      if (w.rigid_model().filters_collisions() && collision_filtered(w.rigid_model(), w.rigid_data(), i, j)) continue;
-      // a dynamic body's samples first, so that on a tie it is named as the one inside
-      const bool i_first = !w.body_def(i).kinematic;
-      samples_inside(w, i_first ? i : j, i_first ? j : i, poses, deepest);
-      samples_inside(w, i_first ? j : i, i_first ? i : j, poses, deepest);
+  std::stable_sort(order.begin(), order.end(), [&low](int i, int j) { return low[i] < low[j]; });
+  for (int p = 0; p < n; ++p) rank[order[p]] = p;
+  std::vector<std::array<int, 2>> pairs;
+  if (sweep || !pairs_by_grid(w, rank, pairs)) pairs = pairs_by_sweep(w, order);
+  for (const auto& [i, j] : pairs) {
+    if (w.body_def(i).kinematic && w.body_def(j).kinematic) continue;
+    // (a pair kept from colliding, jointed or filtered, may overlap)
+    if (w.rigid_model().filters_collisions() && collision_filtered(w.rigid_model(), w.rigid_data(), i, j)) continue;
+    const bool i_first = !w.body_def(i).kinematic;
+    const std::uint64_t order = (std::uint64_t{1} << 63) | (static_cast<std::uint64_t>(rank[i]) << 31) |
+                                static_cast<std::uint64_t>(rank[j]);
+    out.push_back({i_first ? i : j, i_first ? j : i, pair_bound(reach[i], reach[j]), order});
+  }
+  return out;
+}
+
+// The deepest of one candidate's depths, first on a tie, as the figure's loops offer them
+PenetrationFigure candidate_depth(const World& w, const Candidate& c, const std::vector<Pose>& poses) {
+  PenetrationFigure deepest;
+  if (c.b < 0) {
+    const double height = w.ground()->height;
+    const Points& samples = w.body_def(c.a).samples;
+    for (Eigen::Index s = 0; s < samples.rows(); ++s) {
+      offer(deepest, height - poses[c.a].apply(samples.row(s).transpose()).y(), c.a, -1);
+    }
+    return deepest;
+  }
+  samples_inside(w, c.a, c.b, poses, deepest);
+  samples_inside(w, c.b, c.a, poses, deepest);
+  return deepest;
+}
+
+}  // namespace
+
+BodyExtent body_extent(const RigidBodyDef& def) {
+  BodyExtent e;
+  e.shape = def.shape.get();
+  e.samples_at = def.samples.data();
+  e.sample_count = def.samples.rows();
+  for (Eigen::Index s = 0; s < def.samples.rows(); ++s) e.samples = std::max(e.samples, def.samples.row(s).norm());
+  OrientedBox box;
+  if (const auto* sphere = dynamic_cast<const SphereDistance*>(def.shape.get())) {
+    e.solid = -sphere->phi(Vec3::Zero());
+  } else if (oriented_box(def.shape.get(), Pose{}, box)) {
+    e.half = box.half;
+    e.solid = box.half.norm();
+    e.is_box = true;
+    e.samples_in_box = true;
+    for (Eigen::Index s = 0; s < def.samples.rows(); ++s) {
+      e.samples_in_box = e.samples_in_box && (def.samples.row(s).transpose().cwiseAbs() - box.half).maxCoeff() <= 0.0;
+    }
+  } else if (!def.shape) {
+    e.solid = 0.0;  // (nothing is inside a body without a shape)
+  }
+  return e;
+}
+
+PenetrationFigure body_penetration(const World& w) {
+  std::vector<BodyExtent> extents(w.body_count());
+  for (int i = 0; i < w.body_count(); ++i) extents[i] = body_extent(w.body_def(i));
+  return body_penetration(w, extents);
+}
+
+PenetrationFigure body_penetration_every_sample(const World& w) {
+  const int n = w.body_count();
+  std::vector<BodyReach> reach(n);
+  std::vector<Pose> poses(n);
+  for (int i = 0; i < n; ++i) poses[i] = w.body_mesh_pose(i);
+  PenetrationFigure deepest;
+  for (const Candidate& c : candidates(w, reach, true)) {
+    const PenetrationFigure d = candidate_depth(w, c, poses);
+    offer(deepest, d.depth, d.a, d.b);
+  }
+  return deepest;
+}
+
+// The candidates deepest bound first: once a bound is below the deepest depth found, no
+// later candidate can be deeper (nor tie: a tie goes to the candidate first in the figure's
+// order, so a candidate whose bound equals the deepest is still measured, and the first of
+// the deepest is kept whatever the order they were measured in)
+PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>& extents) {
+  const int n = w.body_count();
+  std::vector<BodyReach> reach(n);
+  std::vector<Pose> poses(n);
+  for (int i = 0; i < n; ++i) {
+    reach[i] = body_reach(w, i, extents[i]);
+    poses[i] = reach[i].pose;
+  }
+  const std::vector<Candidate> all = candidates(w, reach);
+  // the candidates that may hold a depth (> 0), as a heap by bound: every candidate whose
+  // bound is not below the final deepest depth is measured, in whatever order they come
+  std::vector<std::pair<double, int>> heap;
+  for (int k = 0; k < static_cast<int>(all.size()); ++k) {
+    const double bound = std::isnan(all[k].bound) ? INFINITY : all[k].bound;
+    if (bound > 0.0) heap.push_back({bound, k});
+  }
+  std::make_heap(heap.begin(), heap.end());
+  PenetrationFigure deepest;
+  std::uint64_t first = 0;  // the place of the candidate that gave `deepest`
+  while (!heap.empty() && !(heap.front().first < deepest.depth)) {
+    const int k = heap.front().second;
+    std::pop_heap(heap.begin(), heap.end());
+    heap.pop_back();
+    const PenetrationFigure d = candidate_depth(w, all[k], poses);
+    if (d.depth > deepest.depth || (d.a >= 0 && d.depth == deepest.depth && all[k].order < first)) {
+      deepest = d;
+      first = all[k].order;
     }
   }
   return deepest;
@@ -118,6 +368,57 @@ ClothQuality cloth_quality(const World& w, int c) {
     for (int k = 1; k < 8; ++k) probe(a + (k / 8.0) * (b - a), q.edge_penetration);
   }
   return q;
+}
+
+bool QualityMeter::unchanged(const World& w) const {
+  const int n = w.body_count();
+  if (!measured_ || static_cast<int>(poses_.size()) != 7 * n) return false;
+  for (int i = 0; i < n; ++i) {
+    const RigidBodyDef& def = w.body_def(i);
+    if (shapes_[2 * i] != def.shape.get() || shapes_[2 * i + 1] != def.samples.data()) return false;
+    const Vec3& x = w.rigid_data().x[i];
+    const Quat& q = w.rigid_data().q[i];
+    const double now[7] = {x.x(), x.y(), x.z(), q.w(), q.x(), q.y(), q.z()};
+    if (std::memcmp(now, &poses_[7 * i], sizeof now) != 0) return false;
+  }
+  const double ground = w.ground() ? w.ground()->height : NAN;
+  return std::memcmp(&ground, &ground_, sizeof ground) == 0 && w.rigid_data().joints.enabled == joints_enabled_;
+}
+
+void QualityMeter::remember(const World& w) {
+  const int n = w.body_count();
+  poses_.resize(7 * n);
+  shapes_.resize(2 * n);
+  for (int i = 0; i < n; ++i) {
+    const Vec3& x = w.rigid_data().x[i];
+    const Quat& q = w.rigid_data().q[i];
+    const double now[7] = {x.x(), x.y(), x.z(), q.w(), q.x(), q.y(), q.z()};
+    std::memcpy(&poses_[7 * i], now, sizeof now);
+    shapes_[2 * i] = w.body_def(i).shape.get();
+    shapes_[2 * i + 1] = w.body_def(i).samples.data();
+  }
+  joints_enabled_ = w.rigid_data().joints.enabled;
+  ground_ = w.ground() ? w.ground()->height : NAN;
+  measured_ = true;
+}
+
+FrameQuality QualityMeter::measure(const World& w) {
+  if (!unchanged(w)) {
+    extents_.resize(w.body_count());
+    for (int i = 0; i < w.body_count(); ++i) {
+      const RigidBodyDef& def = w.body_def(i);
+      const BodyExtent& e = extents_[i];
+      if (e.shape != def.shape.get() || e.samples_at != def.samples.data() || e.sample_count != def.samples.rows()) {
+        extents_[i] = body_extent(def);
+      }
+    }
+    body_ = body_penetration(w, extents_);
+    remember(w);
+  }
+  FrameQuality quality;
+  quality.body_penetration = body_;
+  for (int c = 0; c < w.cloth_count(); ++c) quality.cloths.push_back(cloth_quality(w, c));
+  return quality;
 }
 
 FrameQuality measure_quality(const World& w) {

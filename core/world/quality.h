@@ -8,6 +8,7 @@
 
 #include "world/world.h"
 
+#include <cmath>
 #include <vector>
 
 namespace simbake {
@@ -40,5 +41,49 @@ FrameQuality measure_quality(const World& world);
 // Each part on its own
 PenetrationFigure body_penetration(const World& world);
 ClothQuality cloth_quality(const World& world, int cloth);
+
+// What bounds how deep one body's samples can be in anything, from its def alone
+struct BodyExtent {
+  const void* shape = nullptr;       // the shape and samples it was taken from, by address
+  const void* samples_at = nullptr;
+  Eigen::Index sample_count = 0;
+  double samples = 0.0;              // largest |sample| in mesh coordinates (m)
+  double solid = INFINITY;           // the solid lies within this of the mesh origin (m); a
+                                     // grid's phi is no exact distance: no bound
+  bool is_box = false;               // a box shape (BoxDistance) ...
+  bool samples_in_box = false;       // ... whose samples all lie on or in it
+  Vec3 half = Vec3::Zero();          // its half edge lengths (m)
+};
+BodyExtent body_extent(const RigidBodyDef& def);
+
+// body_penetration with each body's extent (extents[i] of body i) already known
+PenetrationFigure body_penetration(const World& world, const std::vector<BodyExtent>& extents);
+
+// The body figure by testing every sample of every pair whose bounding spheres meet: what
+// body_penetration returns, bit for bit (it skips only what cannot be the deepest); the
+// reference of the tests
+PenetrationFigure body_penetration_every_sample(const World& world);
+
+// The figures frame after frame, measuring only what can have changed: the body figure is
+// kept while no body has moved (every body's centre of mass and orientation the same bits,
+// the same shapes, the joints' flags the same), as in a pile gone to sleep. The same figures
+// as measure_quality, bit for bit.
+class QualityMeter {
+ public:
+  FrameQuality measure(const World& world);
+
+ private:
+  bool unchanged(const World& world) const;  // since the body figure was last measured
+  void remember(const World& world);
+
+  std::vector<BodyExtent> extents_;        // (nbody)
+
+  std::vector<double> poses_;              // (nbody x 7) x and q when last measured
+  std::vector<const void*> shapes_;        // (nbody x 2) shape and samples, by address
+  std::vector<char> joints_enabled_;       // (njoint)
+  double ground_ = 0.0;                    // its height (m); NaN: no ground
+  PenetrationFigure body_;
+  bool measured_ = false;
+};
 
 }  // namespace simbake

@@ -206,3 +206,9 @@ class World:
     def quality(self) -> dict[str, Any]: ...
     def profile(self) -> dict[str, float]:
         """Wall seconds per stage (core/world/stages.h names them)."""
+
+
+class QualityMeter:
+    """World.quality() frame after frame, measuring only what can have changed: the same figures."""
+    def __init__(self) -> None: ...
+    def measure(self, world: World) -> dict[str, Any]: ...

@@ -1,7 +1,8 @@
 """Quality figures of a bake, frame by frame: what a render would show wrong, in numbers.
 
 The driver hands each written frame's world to :class:`QualityRecorder`, which asks the core
-for the figures (``World.quality()``, measured apart from the solver: core/world/quality.h)
+for the figures (a ``QualityMeter``: ``World.quality()`` measured again only where something
+can have changed; measured apart from the solver: core/world/quality.h)
 and keeps them with the frame's substeps, wall time and kinetic energy. At the end they go
 into a sidecar ``CACHE.qa.json`` (written whole or not at all), a summary into the cache's
 ``customLayerData["simbake"]["qa"]``, and one warning line per figure that crossed its
@@ -80,6 +81,7 @@ MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
 FALLBACKS = ("cloth_held_still", "self_collision_over_budget", "impact_zone_yields", "cloth_let_in", "cloth_gave")
 
 
+_SETTINGS = "simbake:settings"  # where the scene's settings go into the sidecar's text
 _MOTION = ("energy_gain", "unexplained_stop", "unexplained_stop_body", "imparted_speed", "imparted_speed_body")
 
 
@@ -124,6 +126,7 @@ class QualityRecorder:
             + (("joint_error", "joint_error_joint") if scene.joints else ())}
         self.joint_names = [j.name for j in scene.joints]
         self._fallbacks = 0  # the fallbacks counted up to the last recorded frame
+        self._meter = None   # the core's QualityMeter, made at the first frame
         self.cloths: dict[str, dict[str, list]] = {
             name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
                    "edge_penetration": []} for name in self.cloth_names}
@@ -136,7 +139,11 @@ class QualityRecorder:
     def record(self, frame: int, world, substeps: int, wall_seconds: float, origins=None) -> None:
         """The figures of `world` as it is now, written as `frame`; `origins` (bodies, 3): the
         bodies' mesh origins (m), for the motion figures."""
-        quality = world.quality()
+        if self._meter is None:
+            from . import _core  # (the compiled core loads with the world, not with this module)
+
+            self._meter = _core.QualityMeter()
+        quality = self._meter.measure(world)
         self.frames.append(frame)
         f = self.figures
         f["substeps"].append(int(substeps))
@@ -285,7 +292,7 @@ class QualityRecorder:
             "cache": cache.name,
             "cache_sha256": cache_sha256,
             "scene": {"path": str(self.scene.path), "sha256": self.scene.hash(),
-                      "settings": _plain(dataclasses.asdict(self.scene))},
+                      "settings": _plain(self.scene)},
             "thresholds": self.thresholds,
             "frames": self.frames,
             "time": [(f - self.scene.start_frame) / self.scene.fps for f in self.frames],
@@ -302,7 +309,12 @@ class QualityRecorder:
         path = qa_path(cache)
         staged = outputs.staged(cache) if outputs is not None else None
         digest = sha256_of(staged if staged is not None else cache)
-        text = json.dumps(self.as_dict(cache, profile, digest), indent=1, allow_nan=False)
+        data = self.as_dict(cache, profile, digest)
+        # the scene's settings (a line for every body of a pile) on one line: indented JSON is
+        # written by Python's slow encoder, compact JSON by its fast one
+        settings, data["scene"]["settings"] = data["scene"]["settings"], _SETTINGS
+        text = json.dumps(data, indent=1, allow_nan=False)
+        text = text.replace(json.dumps(_SETTINGS), json.dumps(settings, allow_nan=False), 1)
 
         def write(tmp: str) -> None:
             Path(tmp).write_text(text + "\n")
@@ -329,7 +341,10 @@ def _show(value: float, unit: str, scale: float) -> str:
 
 
 def _plain(value: Any) -> Any:
-    """Scene settings as JSON: paths as strings, tuples as lists, non-finite floats as strings."""
+    """Scene settings as JSON: dataclasses as dicts of their fields (dataclasses.asdict's
+    without its deep copies), paths as strings, tuples as lists, non-finite floats as strings."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -36,6 +36,7 @@ ENERGY_FLOOR_SPEED = 0.1     # (m/s) ... and moving at 0.1 m/s: the floor of the
 STOP_SPEED = 1.0             # (m/s): slower bodies stop by friction and sleep
 CLEAR_GAP = 0.1              # (m) between bounding spheres (or to the ground, a cloth's bounds)
 IMPARTED_SPEED = 100.0       # (m/s)
+_ROUND_OFF = 1e-9            # (m): far above the round-off of distances of a scene's size
 
 
 def _moving_kinematic(body) -> bool:
@@ -76,10 +77,13 @@ class MotionFigures:
     # -- state -------------------------------------------------------------------------------
 
     def _rigid(self, world):
-        """Centres of mass, velocities and energies of the dynamic bodies now."""
+        """Velocities, energies and the fastest rim speed of the dynamic bodies now (at the
+        start only: later frames take their energies from the core's statistics)."""
         if not np.any(self.dynamic):
             return np.zeros((0, 3)), 0.0, 0.0, 0.0
         states = world.body_states()
+        if self.start_time is not None:
+            return np.asarray(states["linear_velocity"])[self.dynamic], 0.0, 0.0, 0.0
         x, v, w = (np.asarray(states[key])[self.dynamic] for key in ("center_of_mass", "linear_velocity", "angular_velocity"))
         spin = np.einsum("ij,ij->i", w, np.asarray(states["angular_momentum"])[self.dynamic])
         m = self.masses[self.dynamic]
@@ -145,8 +149,14 @@ class MotionFigures:
         up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
         if self.ground is not None and float(here[0] @ up) - r - self.ground <= CLEAR_GAP:
             return False
-        others = np.array([j for j in range(len(origins)) if j != body], dtype=int)
-        if len(others):
+        if len(origins) > 1:
+            # a body within the gap where it ends the frame is within it along its path too
+            # (the path's distance is at most the end's; the margin covers round-off)
+            ends = np.linalg.norm(origins - here, axis=1) - r - self.radii
+            ends[body] = np.inf
+            if ends.min() <= CLEAR_GAP - _ROUND_OFF:
+                return False
+            others = np.delete(np.arange(len(origins)), body)
             gaps = _segment_distance(here, self._origins[others], origins[others])[0] - r - self.radii[others]
             if gaps.min() <= CLEAR_GAP:
                 return False

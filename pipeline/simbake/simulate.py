@@ -302,6 +302,20 @@ def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Output
     return files
 
 
+class _SharedNormals:
+    """corner_normals, computed once per distinct mesh (a pile of boxes has one)."""
+
+    def __init__(self):
+        self._known: dict[bytes, np.ndarray] = {}
+
+    def __call__(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+        v, t = np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(triangles, dtype=np.int64)
+        key = b"%d:" % len(v) + v.tobytes() + t.tobytes()
+        if key not in self._known:
+            self._known[key] = corner_normals(v, t)
+        return self._known[key]
+
+
 def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
                   clips: int | None = None, level_sets: dict | None = None, outputs: Outputs | None = None):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
@@ -317,11 +331,12 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
 
         return ShotLayerWriter(output, scene, provenance=_provenance(scene), level_sets=level_sets,
                                outputs=outputs)
+    normals = _SharedNormals()
     prims = [
         BodyPrim(name=body.name, points=asset.vertices,
                  face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),
                  face_vertex_indices=asset.triangles.reshape(-1),
-                 normals=corner_normals(asset.vertices, asset.triangles),  # hard edges hard
+                 normals=normals(asset.vertices, asset.triangles),  # hard edges hard
                  interpolation="faceVarying",
                  level_set=str(level_sets.get(index, "")),
                  dynamic=_moves(body))

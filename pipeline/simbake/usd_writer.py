@@ -62,7 +62,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
+from pxr import Gf, Sdf, Vt  # (Sdf alone: Usd and the schema modules are not loaded for a bake)
 
 from .errors import SimulationError
 from .files import commit, remove_if_present, remove_stale_temps
@@ -165,8 +165,8 @@ class BodyPrim:
         if self.interpolation:
             return self.interpolation
         if self.normals.shape[0] == self.points.shape[0]:
-            return UsdGeom.Tokens.vertex
-        return UsdGeom.Tokens.faceVarying
+            return "vertex"
+        return "faceVarying"
 
 
 @dataclass(frozen=True)
@@ -406,12 +406,12 @@ class CacheWriter(StreamingWriter):
 
     def _author_static(self, provenance: dict) -> None:
         layer = self._layer
-        # stage-level metadata through the schema helpers, so the keys are the canonical ones
-        stage = Usd.Stage.Open(layer)
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
-        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-        UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
-        del stage
+        # stage-level metadata, the fields UsdGeom.SetStageUpAxis, SetStageMetersPerUnit and
+        # UsdPhysics.SetStageKilogramsPerUnit author (set on the layer: a stage, and the schema
+        # modules, cost a bake's start-up a tenth of a second)
+        layer.pseudoRoot.SetInfo("upAxis", "Y")
+        layer.pseudoRoot.SetInfo("metersPerUnit", 1.0)
+        layer.pseudoRoot.SetInfo("kilogramsPerUnit", 1.0)
         layer.timeCodesPerSecond = self.fps
         layer.framesPerSecond = self.fps
         layer.startTimeCode = float(self.start_frame)
@@ -452,7 +452,7 @@ class CacheWriter(StreamingWriter):
                 self._attr(mesh, "doubleSided", _TN.Bool, True, uniform=True)
                 p = self._attr(mesh, "points", _TN.Point3fArray)
                 n = self._attr(mesh, "normals", _TN.Normal3fArray)
-                n.SetInfo("interpolation", UsdGeom.Tokens.vertex)
+                n.SetInfo("interpolation", "vertex")
                 v = self._attr(mesh, "velocities", _TN.Vector3fArray)
                 e = self._attr(mesh, "extent", _TN.Float3Array)
                 self._cloth_paths.append((p.path, n.path, v.path, e.path))
@@ -470,7 +470,7 @@ class CacheWriter(StreamingWriter):
         """levelset: a guide Volume whose OpenVDBAsset field is the body's .vdb (grid "surface"),
         by a path relative to this file, in the body's (mesh origin's) frame."""
         volume = self._def(xf.path, "levelset", "Volume")
-        self._attr(volume, "purpose", _TN.Token, UsdGeom.Tokens.guide, uniform=True)
+        self._attr(volume, "purpose", _TN.Token, "guide", uniform=True)
         field = self._def(volume.path, "surface", "OpenVDBAsset")
         relative = os.path.relpath(body.level_set, self.path.parent.absolute())
         self._attr(field, "filePath", _TN.Asset, Sdf.AssetPath(relative if relative.startswith("..")
@@ -499,8 +499,8 @@ class CacheWriter(StreamingWriter):
     def _mesh_topology(self, mesh: Sdf.PrimSpec, counts: np.ndarray, indices: np.ndarray) -> None:
         self._attr(mesh, "faceVertexCounts", _TN.IntArray, Vt.IntArray.FromNumpy(counts))
         self._attr(mesh, "faceVertexIndices", _TN.IntArray, Vt.IntArray.FromNumpy(indices))
-        self._attr(mesh, "subdivisionScheme", _TN.Token, UsdGeom.Tokens.none, uniform=True)
-        self._attr(mesh, "orientation", _TN.Token, UsdGeom.Tokens.rightHanded, uniform=True)
+        self._attr(mesh, "subdivisionScheme", _TN.Token, "none", uniform=True)
+        self._attr(mesh, "orientation", _TN.Token, "rightHanded", uniform=True)
 
     # -- per frame ----------------------------------------------------------------------------
 
