@@ -34,6 +34,7 @@ from .errors import SceneError
 from .scene import (Body, Cloth, Ground, Key, Scene, Shape, DEFAULT_DENSITY, CLOTH_MODELS,
                     COMPRESSION_MODES, CLOTH_INTEGRATORS, RESERVED_NAMES)
 from . import usd_schema
+from .usd_deforming import deformation_source, read_deformation
 from .usd_joints import joint_kinds, read_filtering, read_joints
 from .limits import INERTIA_TOLERANCE, MAX_FRAMES, check_scene
 from .rotations import quat_from_matrix, quat_matrix
@@ -1019,7 +1020,13 @@ class _Reader:
         return tuple(keys)
 
     def _static_body(self, path, d, used: set[str], index: int) -> Body:
+        from pxr import UsdGeom
+
         prim = self.stage.GetPrimAtPath(path)
+        source = deformation_source(prim) if prim.IsA(UsdGeom.Mesh) else None
+        deforming = self._deforming_body(prim, d, used, index, source) if source is not None else None
+        if deforming is not None:
+            return deforming
         r, t, _ = self.frame(prim, "static collider", general=True)
         shape = self._shape(path, [prim], r, t, "static collider", two_sided=True)
         friction, restitution, _ = self._material(path, d)
@@ -1030,6 +1037,37 @@ class _Reader:
                     position=position, orientation=orientation, linear_velocity=(0.0, 0.0, 0.0),
                     angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
                     kinematic=True, prim_path=str(path))
+
+    def _deforming_body(self, prim, d, used: set[str], index: int, source: str) -> Body | None:
+        """A collider Mesh that deforms (simbake.usd_deforming): kinematic, at the origin, its
+        shape the first frame's world surface and its surface at every frame in `deformation`.
+        None for an open mesh: kept as before, a still two-sided surface (warned)."""
+        from pxr import UsdPhysics
+
+        path = prim.GetPath()
+        v, f = self._mesh_triangles(prim)
+        deformation = read_deformation(self, prim, f, len(v), source)
+        first = deformation.vertices[0]
+        what = "skinned by UsdSkel" if source == "skel" else "time-sampled points"
+        if not self._closed(first, f):
+            self.warn(path, f"a deforming collider ({what}) must be a closed mesh wound outwards; this one is "
+                            "open, so it is kept still at its pose at the start time code")
+            return None
+        token = UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr().Get()
+        if token not in (None, "none"):
+            self.warn(path, f"physics:approximation {str(token)!r} is not applied to a deforming collider; "
+                            "its own mesh is used at every frame")
+        self.warn(path, f"a deforming collider ({what}): its motion is not simulated yet; cloth and bodies meet "
+                        "its pose at the start time code (the QA measures the cloth against every frame's pose)")
+        friction, restitution, _ = self._material(path, d)
+        self._body_keys(index, path, path, self.material_path)
+        shape = Shape(kind="mesh", mesh_vertices=first, mesh_triangles=deformation.triangles,
+                      mesh_source=str(path))
+        return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
+                    voxel_size=self._voxel_size([prim], shape), position=(0.0, 0.0, 0.0),
+                    orientation=(1.0, 0.0, 0.0, 0.0), linear_velocity=(0.0, 0.0, 0.0),
+                    angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
+                    kinematic=True, prim_path=str(path), deformation=deformation)
 
     def _ground(self, path, d) -> Ground:
         prim = self.stage.GetPrimAtPath(path)

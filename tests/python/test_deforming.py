@@ -1,0 +1,169 @@
+"""Deforming colliders (issue 34, first slice): a USD collider Mesh with time-sampled points,
+or one skinned by UsdSkel, read at every frame; the QA measures cloth inside it at its own pose.
+
+The shots come from tests/data/shots/make_deforming.py: a sphere whose points swell and sway
+(radius and centre known in closed form at every frame), the same sphere skinned to one
+joint, and a slab whose points rise under a ball.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import simbake
+from conftest import module_from_file
+from simbake.cli import main
+from simbake.qa_deforming import deepest_distance, inside_closed, penetration
+
+pxr = pytest.importorskip("pxr")
+from pxr import Usd, UsdGeom, Vt  # noqa: E402
+
+SHOTS = Path(__file__).resolve().parents[1] / "data" / "shots"
+
+
+shots = module_from_file(SHOTS / "make_deforming.py")
+
+
+def test_checked_in_shots_are_what_the_generator_writes(tmp_path):
+    for name, write in (("deforming_sphere", shots.write_deforming_sphere),
+                        ("skinned_sphere", shots.write_skinned_sphere),
+                        ("rising_floor", shots.write_rising_floor)):
+        write(tmp_path / f"{name}.usda")
+        assert (tmp_path / f"{name}.usda").read_text() == (SHOTS / f"{name}.usda").read_text(), name
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------
+
+def _sphere_error(vertices: np.ndarray, frame: int) -> float:
+    """The largest distance of the vertices from the generator's analytic sphere at `frame`."""
+    centre, radius = shots.sphere_at(frame)
+    return float(np.abs(np.linalg.norm(vertices - centre, axis=1) - radius).max())
+
+
+def test_time_sampled_points_are_read_at_every_frame():
+    scene = simbake.load_scene(SHOTS / "deforming_sphere.usda")
+    (body,) = scene.bodies
+    d = body.deformation
+    assert body.kinematic and d.source == "points"
+    assert d.vertices.shape == (shots.END - shots.START + 1, len(shots.unit_sphere()[0]), 3)
+    # every vertex on the analytic sphere of its frame; the file holds float32 points (m ~ 0.5:
+    # rounding 3e-8), so 1e-6 m
+    assert max(_sphere_error(d.vertices[k], shots.START + k) for k in range(len(d.vertices))) < 1e-6
+    # the body's shape is the first frame's surface, in world coordinates
+    assert body.position == (0.0, 0.0, 0.0) and body.orientation == (1.0, 0.0, 0.0, 0.0)
+    np.testing.assert_array_equal(body.shape.mesh_vertices, d.vertices[0])
+    # one line says the motion is not simulated yet
+    lines = [w for w in scene.warnings if "/World/Body" in w]
+    assert len(lines) == 1 and "deforming collider" in lines[0] and "not simulated" in lines[0], scene.warnings
+
+
+@pytest.mark.parametrize("method", ["classicLinear", "dualQuaternion"])
+def test_skinned_sphere_is_the_same_surface_as_the_sampled_one(tmp_path, method):
+    """UsdSkel's skinning (one joint that translates and scales) against the sphere's closed
+    form. The SkelAnimation's scales are half floats (a 10-bit mantissa: up to 2^-11 of s ~ 1.2
+    relative, 0.35 m x 6e-4 = 2e-4 m), so 3e-4 m."""
+    shot = shots.write_skinned_sphere(tmp_path / "skinned.usda", method)
+    scene = simbake.load_scene(shot)
+    (body,) = scene.bodies
+    d = body.deformation
+    assert d.source == "skel"
+    worst = max(_sphere_error(d.vertices[k], shots.START + k) for k in range(len(d.vertices)))
+    assert worst < 3e-4, worst
+    # and it moves: the radius changes by 2 DR over the shot
+    radii = [np.linalg.norm(v - v.mean(axis=0), axis=1).mean() for v in d.vertices]
+    assert max(radii) - min(radii) > 1.9 * shots.DR
+
+
+def test_skinning_follows_the_skeleton_world_transform(tmp_path):
+    """A SkelRoot moved by 1 m along x moves the skinned surface with it (the mesh's own
+    transform does not count: UsdSkel ignores it)."""
+    shot = shots.write_skinned_sphere(tmp_path / "moved.usda")
+    stage = Usd.Stage.Open(str(shot))
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World/Character")).AddTranslateOp().Set((1.0, 0.0, 0.0))
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World/Character/Body")).AddTranslateOp().Set((0.0, 5.0, 0.0))
+    stage.GetRootLayer().Save()
+    moved = simbake.load_scene(shot).bodies[0].deformation.vertices
+    here = simbake.load_scene(SHOTS / "skinned_sphere.usda").bodies[0].deformation.vertices
+    np.testing.assert_allclose(moved - here, np.broadcast_to([1.0, 0.0, 0.0], here.shape), atol=1e-6)
+
+
+def test_a_point_count_that_changes_is_a_one_line_error(tmp_path, capsys):
+    shot = shots.write_deforming_sphere(tmp_path / "bad.usda")
+    stage = Usd.Stage.Open(str(shot))
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Body")).GetPointsAttr()
+    points.Set(Vt.Vec3fArray(list(points.Get(5))[:-1]), 5)
+    stage.GetRootLayer().Save()
+    out = tmp_path / "out.usdc"
+    assert main(["bake", str(shot), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "bad.usda: /World/Body.points: has 481 points at time code 5, 482 at the start" in err, err
+    assert "\n" not in err and not out.exists()
+
+
+def test_a_rigid_collider_mesh_is_not_deforming(tmp_path):
+    shot = shots.write_deforming_sphere(tmp_path / "still.usda")
+    stage = Usd.Stage.Open(str(shot))
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Body")).GetPointsAttr()
+    first = points.Get(shots.START)
+    points.Clear()
+    points.Set(first)
+    stage.GetRootLayer().Save()
+    (body,) = simbake.load_scene(shot).bodies
+    assert body.deformation is None
+
+
+# --------------------------------------------------------------------------------------------
+# the QA's measure, against exact answers
+# --------------------------------------------------------------------------------------------
+
+def _cube():
+    import trimesh
+
+    box = trimesh.creation.box([1.0, 1.0, 1.0])
+    return np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int32)
+
+
+def test_penetration_of_points_in_a_unit_cube_is_their_depth():
+    v, f = _cube()
+    # depth to the nearest face, exact: 0.5 - max |x_i|
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.7, 0.7, (4000, 3))
+    inside = np.all(np.abs(points) < 0.5, axis=1)
+    np.testing.assert_array_equal(inside_closed(points, v[f]), inside)
+    depth = 0.5 - np.abs(points[inside]).max(axis=1)
+    assert deepest_distance(points[inside], v[f]) == pytest.approx(depth.max(), abs=1e-12)
+    assert penetration(points, v, f) == pytest.approx(depth.max(), abs=1e-12)
+    assert penetration(points[~inside], v, f) == 0.0
+    assert penetration(np.array([[0.0, 0.0, 0.0]]), v, f) == pytest.approx(0.5, abs=1e-12)
+
+
+def test_the_qa_warns_when_cloth_ends_inside_a_deforming_body(tmp_path):
+    """Until the collider's motion is simulated, the sheet rests on its first pose: as the
+    sphere swells (its radius grows by DR and its centre sways by SWAY by frame 13) the sheet
+    is inside it, and the QA measures that at the sphere's own pose."""
+    out = tmp_path / "c.usdc"
+    stats = simbake.bake(simbake.load_scene(SHOTS / "deforming_sphere.usda"), out, end_frame=13, threads=1)
+    qa = json.loads(stats.qa.read_text())
+    depth = qa["figures"]["cloth_penetration"]
+    # independently: the cloth's vertices against the sphere's closed form at frame 13. The
+    # mesh's facets are chords: a point's depth in the mesh is its depth in the sphere less at
+    # most the facets' sag, the radius less the nearest facet plane's distance from the centre
+    stage = Usd.Stage.Open(str(out))
+    points = np.array(UsdGeom.Mesh(stage.GetPrimAtPath("/World/Sheet")).GetPointsAttr().Get(13), dtype=np.float64)
+    centre, radius = shots.sphere_at(13)
+    analytic = float((radius - np.linalg.norm(points - centre, axis=1)).max())
+    corners = simbake.load_scene(SHOTS / "deforming_sphere.usda").bodies[0].deformation.vertices[12][
+        shots.unit_sphere_triangles()] - centre
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    sag = radius - float(np.abs(np.einsum("ij,ij->i", corners[:, 0], normals) / np.linalg.norm(normals, axis=1)).min())
+    assert analytic > 0.1 and 0 < sag < 5e-3
+    measured = qa["cloths"]["Sheet"]["vertex_penetration"][-1]
+    assert analytic - sag - 1e-6 <= measured <= analytic + 1e-6, (measured, analytic, sag)
+    assert depth[-1] >= qa["cloths"]["Sheet"]["vertex_penetration"][-1]
+    assert any("cloth 'Sheet' penetration" in w for w in stats.warnings), stats.warnings
