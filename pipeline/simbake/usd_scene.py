@@ -1057,8 +1057,6 @@ class _Reader:
         if token not in (None, "none"):
             self.warn(path, f"physics:approximation {str(token)!r} is not applied to a deforming collider; "
                             "its own mesh is used at every frame")
-        self.warn(path, f"a deforming collider ({what}): its motion is not simulated yet; cloth and bodies meet "
-                        "its pose at the start time code (the QA measures the cloth against every frame's pose)")
         friction, restitution, _ = self._material(path, d)
         self._body_keys(index, path, path, self.material_path)
         shape = Shape(kind="mesh", mesh_vertices=first, mesh_triangles=deformation.triangles,
