@@ -299,6 +299,9 @@ def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Output
     files: dict[int, Path] = {}
     written: dict[int, str] = {}  # id(level set) -> file name: copies of one mesh share a file
     for index, body, asset in wanted:
+        if body.deformation is not None:  # one grid a frame
+            files[index] = deforming_level_set_files(scene, body, asset, tmp, final)
+            continue
         name = written.get(id(asset.level_set))
         if name is None:
             shell = max(body.shape.thickness, asset.voxel_size) if body.shape.thickness > 0 else 0.0
@@ -313,6 +316,29 @@ def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Output
         files[index] = final / name
     outputs.stage(tmp, final)  # renamed into place with the cache
     return files
+
+
+def deforming_level_set_files(scene: Scene, body, asset: BodyAsset, tmp: Path, final: Path) -> tuple[Path, ...]:
+    """A deforming collider's level set at every frame (baked, or read from the level-set
+    cache: the very grids the solver reads), copied into `tmp` as NAME.FRAME.HASH.vdb: their
+    final paths in `final`, in frame order from the start frame."""
+    import shutil
+
+    from .assets import level_set_cache_path
+
+    paths = []
+    d = body.deformation
+    for k, vertices in enumerate(d.vertices):
+        vertices = np.ascontiguousarray(vertices)
+        level_set = bake_level_set(vertices, d.triangles, asset.voxel_size)
+        cached = level_set_cache_path(vertices, d.triangles, asset.voxel_size)
+        name = f"{body.name}.{scene.start_frame + k:04d}.{cached.stem[:12]}.vdb"
+        if cached.is_file():
+            shutil.copyfile(cached, tmp / name)
+        else:
+            level_set.write(str(tmp / name))
+        paths.append(final / name)
+    return tuple(paths)
 
 
 def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",

@@ -232,3 +232,25 @@ def test_a_ball_rides_a_slowly_rising_floor(tmp_path):
     assert min(gaps) >= -1e-3, min(gaps)
     # it rose with the slab (0.1 m/s x 47 / 24 s = 196 mm), not bouncing off it: within 2 mm
     assert max(gaps) <= 2e-3, max(gaps)
+
+
+def test_the_level_set_of_every_frame_is_written_beside_the_cache(tmp_path):
+    """The guide Volume of a deforming collider names one .vdb a frame (a time-sampled
+    filePath), each the grid of that frame's surface: phi at that frame's mesh vertices is 0
+    to within the grid's trilinear error (a fraction of a voxel)."""
+    from simbake import _core
+
+    scene = simbake.load_scene(SHOTS / "deforming_sphere.usda")
+    out = tmp_path / "c.usdc"
+    simbake.bake(scene, out, end_frame=6, threads=1)
+    stage = Usd.Stage.Open(str(out))
+    file_path = stage.GetPrimAtPath("/World/Body_levelset/surface").GetAttribute("filePath")
+    assert file_path.GetTimeSamples() == [float(f) for f in range(1, 7)]
+    names = set()
+    for k, frame in enumerate(range(1, 7)):
+        vdb = (out.parent / file_path.Get(frame).path).resolve()
+        names.add(vdb.name)
+        grid = _core.LevelSet.read(str(vdb))
+        vertices = scene.bodies[0].deformation.vertices[k]
+        assert np.abs(grid.phi(np.ascontiguousarray(vertices))).max() < 0.5 * grid.voxel_size, frame
+    assert len(names) == 6 and sorted(p.name for p in (tmp_path / "c.vdb").iterdir()) == sorted(names)
