@@ -147,8 +147,7 @@ void World::step_bodies(double dt) {
   // every dynamic body asleep and no kinematic body moving: no pair, no contact, nothing moves
   bool quiet = true;
   for (int i = 0; i < body_count() && quiet; ++i) {
-    const bool deforming = i < static_cast<int>(scratch.surfaces.size()) && scratch.surfaces[i];
-    quiet = model.defs[i].kinematic ? !moving_kinematic(model, data, i) && !deforming : data.asleep[i] != 0;
+    quiet = model.defs[i].kinematic ? !moving_kinematic(model, data, i) : data.asleep[i] != 0;
   }
   if (quiet) {
     scratch.pairs.clear();
@@ -217,6 +216,7 @@ void World::set_deforming_frame(int i, const Points& vertices, SignedDistancePtr
   }
   rigid_scratch_.surfaces.resize(body_count(), nullptr);
   rigid_scratch_.surfaces[i] = surfaces[i].get();
+  def.deforming = true;
   def.shape = surfaces[i]->shape_at(0.0);
   // the broad phases' and the contacts' reach: the surface anywhere over the frame
   def.bounding_radius = surfaces[i]->reach(rigid_data_.x[i]);

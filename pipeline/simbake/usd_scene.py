@@ -47,6 +47,8 @@ CLOTH_API = "SimbakeClothAPI"
 _Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # stage Z-up -> Y-up
 _SQRT_HALF = math.sqrt(0.5)
 _TOL = 1e-6  # relative tolerance on orthogonality and uniform scale of transforms
+DEFORMING_REACH = 2  # voxels a deforming collider's vertex may move in a frame: the grids'
+                     # exterior band (3 voxels) less one, where phi is still a distance
 
 
 # --------------------------------------------------------------------------------------------
@@ -1061,11 +1063,26 @@ class _Reader:
         self._body_keys(index, path, path, self.material_path)
         shape = Shape(kind="mesh", mesh_vertices=first, mesh_triangles=deformation.triangles,
                       mesh_source=str(path))
+        self._fast_deformation(path, deformation, self._voxel_size([prim], shape))
         return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
                     voxel_size=self._voxel_size([prim], shape), position=(0.0, 0.0, 0.0),
                     orientation=(1.0, 0.0, 0.0, 0.0), linear_velocity=(0.0, 0.0, 0.0),
                     angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
                     kinematic=True, prim_path=str(path), deformation=deformation)
+
+    def _fast_deformation(self, path, deformation, voxel_size: float) -> None:
+        """Warns when the surface moves further in a frame than its level sets' exterior band
+        reaches (DEFORMING_REACH voxels): inside the frame the contacts blend the frame's two
+        level sets, which are then no longer distances there."""
+        from .assets import automatic_voxel_size
+
+        voxel = voxel_size or automatic_voxel_size(deformation.vertices[0])
+        moves = np.linalg.norm(np.diff(deformation.vertices, axis=0), axis=2)
+        if len(moves) and moves.max() > DEFORMING_REACH * voxel:
+            frame = int(self.start) + 1 + int(np.argmax(moves.max(axis=1)))
+            self.warn(path, f"a vertex moves {moves.max() * 1e3:.3g} mm in the frame to time code {frame}, more "
+                            f"than {DEFORMING_REACH} voxels of its level set ({voxel * 1e3:.3g} mm): contacts inside "
+                            "such frames are approximate (more frames per second, or coarser voxels, keep them exact)")
 
     def _ground(self, path, d) -> Ground:
         prim = self.stage.GetPrimAtPath(path)
