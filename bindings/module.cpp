@@ -568,6 +568,13 @@ void bind_world_building(py::class_<World>& world) {
       .def("add_cloth", [](World& w, const std::optional<ClothDesc>& given, const py::kwargs& kwargs) {
              return w.add_cloth(given_or_from_keywords(given, kwargs, "desc"));
            }, py::arg("desc") = py::none(), "add_cloth(ClothDesc) or add_cloth(**ClothDesc fields): the cloth's index")
+      .def("set_deforming_frame", [](World& w, long long index, const Points& vertices, const LevelSet& level_set,
+                                      double frame_dt) {
+             w.set_deforming_frame(checked_index(index, w.body_count(), "body"), vertices, level_set.distance,
+                                   positive(frame_dt, "frame_dt"));
+           }, py::arg("index"), py::arg("vertices"), py::arg("level_set"), py::arg("frame_dt"),
+           "Deforming kinematic body (mesh pose the identity): its surface at the end of the next frame of frame_dt s, "
+           "its mesh's vertices (n, 3) in world coordinates and their level set; the first call places it, still")
       .def("set_kinematic_track", [](World& w, long long index, const std::vector<double>& times, const Points& origins,
                                       const Quats& orientations) {
              if (origins.rows() != static_cast<Eigen::Index>(times.size()) || orientations.rows() != origins.rows()) {

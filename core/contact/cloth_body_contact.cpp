@@ -99,6 +99,7 @@ const BodyFeatures& ClothBodyContact::body_features(const ContactBodies& bodies,
   if (features) return *features;
   features.emplace();
   const ContactBody& body = bodies.body(b);
+  if (body.surface) return *features;  // a deforming surface's edges move: its obstacle keeps them out
   const SignedDistance* shape = body.shape;
   const double h = thickness_, spacing = 0.25 * mean_edge_;
   if (const auto* box = dynamic_cast<const BoxDistance*>(shape)) {

@@ -43,6 +43,10 @@ void ClothObstacles::begin_step(const Cloth& cloth, const ContactBodies& bodies,
   Eigen::Index row = cloth_vertices_;
   for (size_t o = 0; o < body_.size(); ++o) {
     const ContactBody& body = bodies.body(body_[o]);
+    if (body.surface) {  // a deforming surface: each vertex on its own line over the frame
+      row = deforming_rows(*body.surface, body.surface_start, body.surface_end, dt, row, motion_[o]);
+      continue;
+    }
     const Pose& from = body.start_pose;
     const Pose& to = body.pose;
     for (Eigen::Index k = 0; k < mesh_[o].vertices.rows(); ++k, ++row) {
@@ -72,6 +76,20 @@ void ClothObstacles::begin_step(const Cloth& cloth, const ContactBodies& bodies,
       if (phi < give) yielding_[k] = any_yielding_ = true;  // (inside: phi < 0 <= give)
     }
   }
+}
+
+// A deforming surface's vertices at the step's start (blend s0) with the velocities that
+// take them to where they are at its end (s1), from `row` on; its impact zones' motion is the
+// affine field nearest the vertices' velocities (DeformingSurface::affine_motion)
+Eigen::Index ClothObstacles::deforming_rows(const DeformingSurface& surface, double s0, double s1, double dt,
+                                            Eigen::Index row, ObstacleMotion& motion) {
+  for (int k = 0; k < surface.vertex_count(); ++k, ++row) {
+    const Vec3 start = surface.vertex(k, s0);
+    x_.row(row) = start.transpose();
+    v_.row(row) = ((surface.vertex(k, s1) - start) / dt).transpose();
+  }
+  surface.affine_motion(s0, motion.A, motion.c);
+  return row;
 }
 
 void ClothObstacles::load(const Points& cloth_velocities, const std::vector<Vec3>& cloth_support) {

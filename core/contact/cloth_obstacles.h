@@ -15,7 +15,8 @@
 // contacts keep the cloth's points off them.
 //
 // Each step the obstacles' vertices run on lines from the body's pose at the start of the
-// cloth's step (ContactBody::start_pose) to its pose now, the same x + s dt v as the cloth's.
+// cloth's step (ContactBody::start_pose) to its pose now, the same x + s dt v as the cloth's;
+// a deforming surface's vertices each on its own line (contact/deforming_surface.h).
 // The self-collision sees the cloth's vertices and then the obstacles' in one set of
 // arrays, made here: load() before each self-collision call, store() after it.
 #pragma once
@@ -67,6 +68,9 @@ class ClothObstacles {
   Points padded(const Points& cloth_rows) const;
 
  private:
+  Eigen::Index deforming_rows(const DeformingSurface& surface, double s0, double s1, double dt, Eigen::Index row,
+                              ObstacleMotion& motion);
+
   std::vector<int> body_;             // (obstacles) body index
   std::vector<TriangleMesh> mesh_;    // (obstacles)
   int cloth_vertices_ = 0;

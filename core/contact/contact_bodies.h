@@ -9,6 +9,7 @@
 // arithmetic in the same order, so its bodies end as this buffer's do, bit for bit.
 #pragma once
 
+#include "levelset/deforming_surface.h"
 #include "geometry/mesh.h"
 #include "levelset/signed_distance.h"
 #include "math/types.h"
@@ -44,6 +45,12 @@ struct ContactBody {
   // contact/cloth_obstacles.h); it passes through those inside it at the step's start that a
   // still surface holds, too
   const std::vector<char>* let_in = nullptr;
+  // a deforming collider (kinematic, its mesh pose the identity): its surface over the frame,
+  // and where in the frame the cloth's step starts and ends (DeformingSurface::blend); `shape`
+  // is the surface's level set at `surface_end`, and its mesh the surface's topology
+  const DeformingSurface* surface = nullptr;
+  double surface_start = 0.0;
+  double surface_end = 1.0;
 };
 
 // The ground plane y = height, as the contacts see it
@@ -88,6 +95,7 @@ class ContactBodies {
   // the velocity of body b's surface at world point p, now (m/s)
   Vec3 velocity_at(int b, const Vec3& p) const {
     const ContactBody& body = bodies_[b];
+    if (body.surface) return body.surface->velocity_at(p);
     const Vec3 omega = body.kinematic ? body.spin
                                       : angular_velocity(body.inverse_inertia, body.isotropic, body.orientation, l_[b]);
     return v_[b] + omega.cross(p - body.center);

@@ -67,4 +67,24 @@ class PlaneDistance final : public SignedDistance {
   double height_;  // (m)
 };
 
+// The surface between two level sets of one deforming collider: phi = (1 - s) phi0 + s phi1,
+// s in [0, 1] (inside a frame: the level sets baked from the frame's start and end meshes).
+// A surface that moves by d between them has its zero set moved by s d to first order, and
+// exactly for a sphere swelling about a fixed centre (phi = |x| - r is linear in r); where the
+// two are further apart than their bands reach it is no longer a distance, so a frame's motion
+// must stay within the bands (a few voxels). The normal is the blend's gradient, normalized
+class BlendedDistance final : public SignedDistance {
+ public:
+  BlendedDistance(SignedDistancePtr start, SignedDistancePtr end, double s);
+  double phi(const Vec3& p) const override;
+  double phi_and_normal(const Vec3& p, Vec3& normal) const override;
+  Box3 bounds() const override;  // both surfaces'
+  double exterior_reach() const override;
+  double blend() const { return s_; }
+
+ private:
+  SignedDistancePtr start_, end_;
+  double s_;  // 0: the start's surface, 1: the end's
+};
+
 }  // namespace simbake

@@ -48,6 +48,7 @@ void refresh_stale_candidates(const RigidModel& model, const RigidData& data, Ri
 // The velocity of body i's point x in the stage under way (m/s; the ground is at rest)
 inline Vec3 point_velocity(const RigidData& data, const RigidScratch& scratch, int i, const Vec3& x) {
   if (i == kGround) return Vec3::Zero();
+  if (!scratch.surfaces.empty() && scratch.surfaces[i]) return scratch.surfaces[i]->velocity_at(x);
   return data.v[i] + scratch.omega[i].cross(x - scratch.candidate_x[i]);
 }
 

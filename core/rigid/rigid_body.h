@@ -52,6 +52,8 @@ struct RigidBodyDef {
   double friction = 0.5;                     // Coulomb coefficient
   double restitution = 0.0;                  // in [0, 1]
   bool kinematic = false;                    // infinite mass, moved only by its own motion
+  bool deforming = false;                    // kinematic, its surface moving (World::set_deforming_frame):
+                                             // always a moving kinematic body
   bool isotropic = false;                    // equal principal moments (a cube, a sphere): the
                                              // torque-free rotation is exact, about L at |L| / I;
                                              // its mesh axes are its principal axes

@@ -51,9 +51,10 @@ inline Vec3 body_angular_velocity(const RigidModel& model, const RigidData& data
   return model.defs[i].kinematic ? data.spin[i] : angular_velocity(model.defs[i], data.q[i], data.l[i]);
 }
 
-// A kinematic body moving in this step (keyed, or with a velocity of its own)
+// A kinematic body moving in this step (keyed, with a velocity of its own, or deforming)
 inline bool moving_kinematic(const RigidModel& model, const RigidData& data, int i) {
-  return model.defs[i].kinematic && (data.v[i] != Vec3::Zero() || data.spin[i] != Vec3::Zero());
+  return model.defs[i].kinematic &&
+         (model.defs[i].deforming || data.v[i] != Vec3::Zero() || data.spin[i] != Vec3::Zero());
 }
 
 }  // namespace simbake

@@ -4,6 +4,7 @@
 // (the rigid state is rigid_data.h's).
 #pragma once
 
+#include "levelset/deforming_surface.h"
 #include "rigid/contact_points.h"
 #include "rigid/islands.h"
 #include "rigid/joints.h"
@@ -60,6 +61,8 @@ struct RigidScratch {
   std::vector<Quat> candidate_q;            // (nbody x 4) and orientations
   std::vector<Vec3> candidate_v;            // (nbody x 3) and velocities (m/s)
   std::vector<Pose> candidate_poses;        // (nbody) mesh poses of the candidates
+  // (nbody) or empty: a deforming collider's surface (its points' velocities), else null
+  std::vector<const DeformingSurface*> surfaces;
   std::vector<Vec3> omega;                  // (nbody x 3) angular velocity the current impulse
                                             // stage uses at points (rad/s, world)
   std::vector<Mat3> inverse_inertia;        // (nbody x 3 x 3) world I^-1 at the start-of-step orientation

@@ -4,13 +4,14 @@
 
 namespace simbake {
 
-void record_start_poses(const RigidModel& model, const RigidData& data, ClothCoupling& coupling) {
+void record_start_poses(const RigidModel& model, const RigidData& data, ClothCoupling& coupling, double time) {
+  coupling.start_time = time;
   std::vector<Pose>& start_poses = coupling.start_poses;
   start_poses.resize(model.body_count());
   for (int b = 0; b < model.body_count(); ++b) start_poses[b] = body_mesh_pose(model, data, b);
 }
 
-void describe_bodies(const RigidModel& model, const RigidData& data, ClothCoupling& coupling) {
+void describe_bodies(const RigidModel& model, const RigidData& data, ClothCoupling& coupling, double time) {
   const std::vector<Pose>& start_poses = coupling.start_poses;
   ContactBodies& out = coupling.bodies;
   out.clear();
@@ -32,6 +33,13 @@ void describe_bodies(const RigidModel& model, const RigidData& data, ClothCoupli
     body.kinematic = def.kinematic;
     body.still = def.kinematic && !moving_kinematic(model, data, b);
     body.island = data.island[b];
+    if (b < static_cast<int>(coupling.surfaces.size()) && coupling.surfaces[b]) {
+      const DeformingSurface& surface = *coupling.surfaces[b];
+      body.surface = &surface;
+      body.surface_start = surface.blend(coupling.start_time);
+      body.surface_end = surface.blend(time);
+      body.still = false;
+    }
     out.add(body, data.v[b], data.l[b], data.asleep[b] != 0);
   }
   if (model.ground) out.set_ground(ContactGround{model.ground->height, model.ground->friction});

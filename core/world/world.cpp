@@ -113,6 +113,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
         break;
       }
       if (k % group == 0) begin_cloth_step();
+      blend_deforming_surfaces(time_ + dt);
       step_bodies(dt);
       if ((k + 1) % group == 0) {
         StageTimer timer(profile_, Stage::kCloths);
@@ -132,6 +133,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
 
 void World::step(double dt) {
   begin_cloth_step();
+  blend_deforming_surfaces(time_ + dt);
   step_bodies(dt);
   StageTimer timer(profile_, Stage::kCloths);
   step_cloths(dt);
@@ -178,7 +180,7 @@ void World::step_bodies(double dt) {
 
 void World::begin_cloth_step() {
   if (cloths_.empty()) return;
-  record_start_poses(rigid_model_, rigid_data_, coupling_);
+  record_start_poses(rigid_model_, rigid_data_, coupling_, time_);
 }
 
 void World::step_cloths(double dt) {
@@ -187,9 +189,42 @@ void World::step_cloths(double dt) {
   for (SteppedCloth& cloth : cloths_) {
     // the bodies as the contacts see them, posed as they are now (only the pinches at the
     // end of this cloth's step move them); what the contacts did to them, applied after
-    describe_bodies(rigid_model_, rigid_data_, coupling_);
+    describe_bodies(rigid_model_, rigid_data_, coupling_, time_);
     if (step_cloth(cloth, coupling_.bodies, dt, cloth_settings, profile_, stats_.self_collision)) ++stats_.cloth_gave;
     apply_contact_results(coupling_.bodies, rigid_model_, rigid_data_);
+  }
+}
+
+void World::set_deforming_frame(int i, const Points& vertices, SignedDistancePtr shape, double frame_dt) {
+  RigidBodyDef& def = rigid_model_.defs[i];
+  if (!def.kinematic) throw std::invalid_argument("only a kinematic body can deform");
+  if (!shape) throw std::invalid_argument("a deforming body needs its level set");
+  if (vertices.rows() != rigid_model_.meshes[i].vertices.rows()) {
+    throw std::invalid_argument("a deforming body keeps its mesh's " + std::to_string(rigid_model_.meshes[i].vertices.rows()) +
+                                " vertices, got " + std::to_string(vertices.rows()));
+  }
+  const Pose pose = body_mesh_pose(i);
+  if (!pose.translation.isZero(1e-12) || !pose.rotation.isIdentity(1e-12)) {
+    throw std::invalid_argument("a deforming body's mesh pose must be the identity (its vertices are in world coordinates)");
+  }
+  std::vector<std::shared_ptr<DeformingSurface>>& surfaces = coupling_.surfaces;
+  surfaces.resize(body_count());
+  if (!surfaces[i]) {
+    surfaces[i] = std::make_shared<DeformingSurface>(vertices, shape, time_);
+  } else {
+    surfaces[i]->set_frame(vertices, shape, time_, frame_dt);
+  }
+  rigid_scratch_.surfaces.resize(body_count(), nullptr);
+  rigid_scratch_.surfaces[i] = surfaces[i].get();
+  def.deforming = true;
+  def.shape = surfaces[i]->shape_at(0.0);
+  // the broad phases' and the contacts' reach: the surface anywhere over the frame
+  def.bounding_radius = surfaces[i]->reach(rigid_data_.x[i]);
+}
+
+void World::blend_deforming_surfaces(double time) {
+  for (size_t b = 0; b < coupling_.surfaces.size(); ++b) {
+    if (coupling_.surfaces[b]) rigid_model_.defs[b].shape = coupling_.surfaces[b]->shape_at(coupling_.surfaces[b]->blend(time));
   }
 }
 

@@ -52,6 +52,11 @@ class World {
   void set_collision_groups(const std::vector<std::vector<int>>& members, const std::vector<std::vector<int>>& filters);
   // Makes kinematic body i follow a key track from now on (time 0 is when the world starts)
   void set_kinematic_track(int i, KinematicTrack track);
+  // Makes kinematic body i a deforming collider (contact/deforming_surface.h) whose surface
+  // ends the next frame (of frame_dt s, from now) at `vertices` (its mesh's, in world
+  // coordinates: the body's mesh pose must be the identity) with the level set `shape` baked
+  // from them (world coordinates); the first call puts it there, still
+  void set_deforming_frame(int i, const Points& vertices, SignedDistancePtr shape, double frame_dt);
   double time() const { return time_; }  // (s) simulated so far
 
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
@@ -87,6 +92,7 @@ class World {
   // one substep of the rigid bodies (every stage but the cloths')
   void step_bodies(double dt);
   void begin_cloth_step();  // records the bodies' poses the cloths' step starts from
+  void blend_deforming_surfaces(double time);  // each deforming collider's level set at `time` (s)
   void step_cloths(double dt);
 
   WorldSettings settings_;

@@ -68,6 +68,7 @@ from pathlib import Path
 from typing import Any
 
 from .files import sha256_of, write_atomically
+from .qa_deforming import DeformingPenetration, has_deforming
 from .qa_motion import MotionFigures
 from .scene import Scene
 
@@ -130,6 +131,8 @@ class QualityRecorder:
         self.cloths: dict[str, dict[str, list]] = {
             name: {"strain": [], "self_intersections": [], "vertex_penetration": [],
                    "edge_penetration": []} for name in self.cloth_names}
+        # cloth inside a deforming collider at its own pose (simbake.qa_deforming)
+        self.deforming = DeformingPenetration(scene) if has_deforming(scene) and scene.cloths else None
 
     @property
     def thresholds(self) -> dict[str, float | None]:
@@ -170,6 +173,8 @@ class QualityRecorder:
             strain = max(strain, c["strain"][-1])
             crossings += max(c["self_intersections"][-1], 0)  # (-1: not counted, warned below)
         f["cloth_penetration"].append(deepest)
+        if self.deforming is not None:
+            self.deforming.fold_into(self.cloths, f, frame, world)
         f["cloth_strain"].append(strain)
         f["cloth_self_intersections"].append(crossings)
         if self.joint_names:

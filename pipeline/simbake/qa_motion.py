@@ -40,7 +40,8 @@ _ROUND_OFF = 1e-9            # (m): far above the round-off of distances of a sc
 
 
 def _moving_kinematic(body) -> bool:
-    return body.kinematic and (bool(body.keys) or any(body.linear_velocity) or any(body.angular_velocity))
+    return body.kinematic and (bool(body.keys) or any(body.linear_velocity) or any(body.angular_velocity)
+                               or body.deformation is not None)
 
 
 def _segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

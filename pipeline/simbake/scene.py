@@ -53,7 +53,7 @@ from typing import Any, Callable, Iterable, Optional
 from .errors import SceneError
 from .limits import check_scene
 
-__all__ = ["Shape", "Ground", "Key", "Body", "Cloth", "Drive", "Joint", "Scene", "load_toml_scene",
+__all__ = ["Shape", "Ground", "Key", "Deformation", "Body", "Cloth", "Drive", "Joint", "Scene", "load_toml_scene",
            "read_scene_data", "scene_from_data"]
 
 Vec2 = tuple[float, float]
@@ -118,6 +118,17 @@ class Key:
 
 
 @dataclass(frozen=True)
+class Deformation:
+    """A deforming collider's surface at every frame of the bake (a USD shot's collider Mesh
+    with time-sampled points, or one skinned by UsdSkel): world vertices, one topology."""
+
+    vertices: Any = field(compare=False, repr=False)   # (frames, n, 3) float64 (m, Y up), read-only;
+                                                       # row k is frame start_frame + k
+    triangles: Any = field(compare=False, repr=False)  # (m, 3) int32, closed, wound outwards
+    source: str = "points"                             # "points" (time-sampled) | "skel" (UsdSkel)
+
+
+@dataclass(frozen=True)
 class Body:
     """A rigid body. Exactly one of ``density`` / ``mass`` is set."""
 
@@ -137,6 +148,9 @@ class Body:
     center_of_mass: Vec3 | None = None  # in the mesh's frame (m); None: the shape's centroid
     inertia: tuple[Vec3, Vec3, Vec3] | None = None  # about the centre of mass, mesh frame (kg m^2)
     prim_path: str = ""  # a USD shot's body: its prim, for messages
+    # a deforming collider (kinematic, at the origin, its shape the first frame's surface): the
+    # surface at every frame; None for a rigid body
+    deformation: Deformation | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)

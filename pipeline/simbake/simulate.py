@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from . import _core
-from .assets import BodyAsset, ClothAsset, load_assets, load_cloth
+from .assets import BodyAsset, ClothAsset, bake_level_set, load_assets, load_cloth
 from .errors import OutputError, SceneError, SimulationError
 from .files import check_output_path, describe
 from .outputs import Outputs, check_outputs
@@ -94,7 +94,20 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
         except ValueError as error:
             raise SceneError(scene.source, scene.source_key(f"cloths[{index}]"), str(error)) from None
     _add_joints(world, scene)
+    set_deforming_frames(scene, world, assets, scene.start_frame)
     return world
+
+
+def set_deforming_frames(scene: Scene, world, assets: list[BodyAsset], frame: int) -> None:
+    """Each deforming collider's surface at `frame` (Body.deformation): its vertices and their
+    level set (baked at the body's voxel size, or read from the level-set cache), where the
+    world's next frame ends it; at the start frame, where it starts, still."""
+    for index, body in enumerate(scene.bodies):
+        if body.deformation is None:
+            continue
+        vertices = np.ascontiguousarray(body.deformation.vertices[frame - scene.start_frame])
+        level_set = bake_level_set(vertices, body.deformation.triangles, assets[index].voxel_size)
+        world.set_deforming_frame(index, vertices, level_set, 1.0 / scene.fps)
 
 
 def _add_joints(world, scene: Scene) -> None:
@@ -286,6 +299,9 @@ def _level_set_files(scene: Scene, assets, output: Path, groups, outputs: Output
     files: dict[int, Path] = {}
     written: dict[int, str] = {}  # id(level set) -> file name: copies of one mesh share a file
     for index, body, asset in wanted:
+        if body.deformation is not None:  # one grid a frame
+            files[index] = deforming_level_set_files(scene, body, asset, tmp, final)
+            continue
         name = written.get(id(asset.level_set))
         if name is None:
             shell = max(body.shape.thickness, asset.voxel_size) if body.shape.thickness > 0 else 0.0
@@ -314,6 +330,29 @@ class _SharedNormals:
         if key not in self._known:
             self._known[key] = corner_normals(v, t)
         return self._known[key]
+
+
+def deforming_level_set_files(scene: Scene, body, asset: BodyAsset, tmp: Path, final: Path) -> tuple[Path, ...]:
+    """A deforming collider's level set at every frame (baked, or read from the level-set
+    cache: the very grids the solver reads), copied into `tmp` as NAME.FRAME.HASH.vdb: their
+    final paths in `final`, in frame order from the start frame."""
+    import shutil
+
+    from .assets import level_set_cache_path
+
+    paths = []
+    d = body.deformation
+    for k, vertices in enumerate(d.vertices):
+        vertices = np.ascontiguousarray(vertices)
+        level_set = bake_level_set(vertices, d.triangles, asset.voxel_size)
+        cached = level_set_cache_path(vertices, d.triangles, asset.voxel_size)
+        name = f"{body.name}.{scene.start_frame + k:04d}.{cached.stem[:12]}.vdb"
+        if cached.is_file():
+            shutil.copyfile(cached, tmp / name)
+        else:
+            level_set.write(str(tmp / name))
+        paths.append(final / name)
+    return tuple(paths)
 
 
 def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
@@ -372,7 +411,7 @@ def _check_outputs(scene: Scene, output: Path, qa: bool, shot: Path | None, inst
     check_outputs([path for path, _ in files], folders, inputs)
 
 
-def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profile: dict) -> float:
+def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profile: dict, assets=()) -> float:
     """Step the world frame by frame into `writer`; returns the deepest penetration seen (m).
     Each frame is written once the next is stepped (its velocities are the motion over it)."""
     frame_dt = 1.0 / scene.fps
@@ -382,10 +421,17 @@ def _bake_frames(scene: Scene, world, writer, recorder, on_frame, pipeline_profi
     rates: list = []  # bodies' velocities over the frame written last
     cloth_count = len(scene.cloths)
     broken: dict = {}  # joint name: the first frame it is broken at
+    deforming = any(b.deformation is not None for b in scene.bodies)
+    if deforming:
+        pipeline_profile["deforming_level_sets"] = 0.0
     for frame in range(scene.start_frame, scene.end_frame + 1):
         frame_start = time.perf_counter()
         substeps = 0
         if frame > scene.start_frame:
+            if deforming:
+                baked = time.perf_counter()
+                set_deforming_frames(scene, world, assets, frame)
+                pipeline_profile["deforming_level_sets"] += time.perf_counter() - baked
             substeps = world.step_frame(frame_dt, scene.substeps)
             stats = world.statistics()
             if not stats["finite"]:
@@ -489,7 +535,7 @@ def _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, insta
     with Outputs() as outputs:  # everything staged, then swapped in together (or nothing)
         level_sets = _level_set_files(scene, assets, output, groups, outputs)
         with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets, outputs) as writer:
-            max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile)
+            max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile, assets)
         if shot is not None:
             from .usd_layer import write_shot_stage
 

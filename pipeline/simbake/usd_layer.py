@@ -277,16 +277,24 @@ class ShotLayerWriter(StreamingWriter):
                 Sdf.AttributeSpec(volume, "xformOpOrder", _TN.TokenArray, variability=Sdf.VariabilityUniform
                                   ).default = Vt.TokenArray(order)
             field = Sdf.PrimSpec(volume, "surface", Sdf.SpecifierDef, "OpenVDBAsset")
-            relative = os.path.relpath(Path(vdb).absolute(), self.path.parent.absolute())
-            Sdf.AttributeSpec(field, "filePath", _TN.Asset).default = Sdf.AssetPath(
-                relative if relative.startswith("..") else f"./{relative}")
+            sequence = tuple(vdb) if isinstance(vdb, (list, tuple)) else (vdb,)  # a deforming collider's: a frame each
+            file_path = Sdf.AttributeSpec(field, "filePath", _TN.Asset)
+            file_path.default = self._relative_asset(sequence[0])
+            for k, frame_vdb in enumerate(sequence if len(sequence) > 1 else ()):
+                layer.SetTimeSample(file_path.path, shot.start_time_code + k, self._relative_asset(frame_vdb))
             Sdf.AttributeSpec(field, "fieldName", _TN.Token).default = "surface"
             rel = Sdf.RelationshipSpec(volume, "field:surface", custom=False)
             rel.targetPathList.explicitItems = [field.path]
-            points = np.asarray(body.shape.mesh_vertices, dtype=np.float32)  # the band hugs the surface
+            points = np.asarray(body.shape.mesh_vertices if body.deformation is None  # the band hugs the surface
+                                else body.deformation.vertices.reshape(-1, 3), dtype=np.float32)
             Sdf.AttributeSpec(volume, "extent", _TN.Float3Array).default = Vt.Vec3fArray.FromNumpy(
                 np.stack([points.min(axis=0), points.max(axis=0)]))
             self.sampled_prims.append(str(volume.path))
+
+    def _relative_asset(self, vdb) -> Sdf.AssetPath:
+        """A .vdb beside the cache as an asset path relative to the cache."""
+        relative = os.path.relpath(Path(vdb).absolute(), self.path.parent.absolute())
+        return Sdf.AssetPath(relative if relative.startswith("..") else f"./{relative}")
 
     # -- frames -------------------------------------------------------------------------------
 

@@ -34,6 +34,7 @@ from .errors import SceneError
 from .scene import (Body, Cloth, Ground, Key, Scene, Shape, DEFAULT_DENSITY, CLOTH_MODELS,
                     COMPRESSION_MODES, CLOTH_INTEGRATORS, RESERVED_NAMES)
 from . import usd_schema
+from .usd_deforming import deformation_source, read_deformation
 from .usd_joints import joint_kinds, read_filtering, read_joints
 from .limits import INERTIA_TOLERANCE, MAX_FRAMES, check_scene
 from .rotations import quat_from_matrix, quat_matrix
@@ -46,6 +47,8 @@ CLOTH_API = "SimbakeClothAPI"
 _Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # stage Z-up -> Y-up
 _SQRT_HALF = math.sqrt(0.5)
 _TOL = 1e-6  # relative tolerance on orthogonality and uniform scale of transforms
+DEFORMING_REACH = 2  # voxels a deforming collider's vertex may move in a frame: the grids'
+                     # exterior band (3 voxels) less one, where phi is still a distance
 
 
 # --------------------------------------------------------------------------------------------
@@ -1019,7 +1022,13 @@ class _Reader:
         return tuple(keys)
 
     def _static_body(self, path, d, used: set[str], index: int) -> Body:
+        from pxr import UsdGeom
+
         prim = self.stage.GetPrimAtPath(path)
+        source = deformation_source(prim) if prim.IsA(UsdGeom.Mesh) else None
+        deforming = self._deforming_body(prim, d, used, index, source) if source is not None else None
+        if deforming is not None:
+            return deforming
         r, t, _ = self.frame(prim, "static collider", general=True)
         shape = self._shape(path, [prim], r, t, "static collider", two_sided=True)
         friction, restitution, _ = self._material(path, d)
@@ -1030,6 +1039,50 @@ class _Reader:
                     position=position, orientation=orientation, linear_velocity=(0.0, 0.0, 0.0),
                     angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
                     kinematic=True, prim_path=str(path))
+
+    def _deforming_body(self, prim, d, used: set[str], index: int, source: str) -> Body | None:
+        """A collider Mesh that deforms (simbake.usd_deforming): kinematic, at the origin, its
+        shape the first frame's world surface and its surface at every frame in `deformation`.
+        None for an open mesh: kept as before, a still two-sided surface (warned)."""
+        from pxr import UsdPhysics
+
+        path = prim.GetPath()
+        v, f = self._mesh_triangles(prim)
+        deformation = read_deformation(self, prim, f, len(v), source)
+        first = deformation.vertices[0]
+        what = "skinned by UsdSkel" if source == "skel" else "time-sampled points"
+        if not self._closed(first, f):
+            self.warn(path, f"a deforming collider ({what}) must be a closed mesh wound outwards; this one is "
+                            "open, so it is kept still at its pose at the start time code")
+            return None
+        token = UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr().Get()
+        if token not in (None, "none"):
+            self.warn(path, f"physics:approximation {str(token)!r} is not applied to a deforming collider; "
+                            "its own mesh is used at every frame")
+        friction, restitution, _ = self._material(path, d)
+        self._body_keys(index, path, path, self.material_path)
+        shape = Shape(kind="mesh", mesh_vertices=first, mesh_triangles=deformation.triangles,
+                      mesh_source=str(path))
+        self._fast_deformation(path, deformation, self._voxel_size([prim], shape))
+        return Body(name=self._name(str(path), used), shape=shape, density=DEFAULT_DENSITY, mass=None,
+                    voxel_size=self._voxel_size([prim], shape), position=(0.0, 0.0, 0.0),
+                    orientation=(1.0, 0.0, 0.0, 0.0), linear_velocity=(0.0, 0.0, 0.0),
+                    angular_velocity=(0.0, 0.0, 0.0), friction=friction, restitution=restitution,
+                    kinematic=True, prim_path=str(path), deformation=deformation)
+
+    def _fast_deformation(self, path, deformation, voxel_size: float) -> None:
+        """Warns when the surface moves further in a frame than its level sets' exterior band
+        reaches (DEFORMING_REACH voxels): inside the frame the contacts blend the frame's two
+        level sets, which are then no longer distances there."""
+        from .assets import automatic_voxel_size
+
+        voxel = voxel_size or automatic_voxel_size(deformation.vertices[0])
+        moves = np.linalg.norm(np.diff(deformation.vertices, axis=0), axis=2)
+        if len(moves) and moves.max() > DEFORMING_REACH * voxel:
+            frame = int(self.start) + 1 + int(np.argmax(moves.max(axis=1)))
+            self.warn(path, f"a vertex moves {moves.max() * 1e3:.3g} mm in the frame to time code {frame}, more "
+                            f"than {DEFORMING_REACH} voxels of its level set ({voxel * 1e3:.3g} mm): contacts inside "
+                            "such frames are approximate (more frames per second, or coarser voxels, keep them exact)")
 
     def _ground(self, path, d) -> Ground:
         prim = self.stage.GetPrimAtPath(path)

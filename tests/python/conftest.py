@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import textwrap
 from pathlib import Path
@@ -32,6 +33,14 @@ BOXES_ONE_CM_DEEP = """
     position = [0.0, 0.99, 0.0]
 """
 MESH_DIR = REPO / "assets" / "meshes"
+
+
+def module_from_file(path: Path):
+    """A script (a scene generator beside its output) imported as a module, by its path."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.fixture(autouse=True)

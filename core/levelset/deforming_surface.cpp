@@ -1,0 +1,113 @@
+#include "levelset/deforming_surface.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace simbake {
+
+DeformingSurface::DeformingSurface(const Points& vertices, SignedDistancePtr shape, double time)
+    : start_(vertices), end_(vertices), velocity_(Points::Zero(vertices.rows(), 3)), start_shape_(shape),
+      end_shape_(shape), start_time_(time) {
+  if (vertices.rows() == 0) throw std::invalid_argument("a deforming surface needs vertices");
+  bin();
+}
+
+void DeformingSurface::set_frame(const Points& vertices, SignedDistancePtr shape, double time, double duration) {
+  if (vertices.rows() != end_.rows()) {
+    throw std::invalid_argument("a deforming surface keeps its " + std::to_string(end_.rows()) + " vertices, got " +
+                                std::to_string(vertices.rows()));
+  }
+  if (!(duration > 0.0)) throw std::invalid_argument("a deforming surface's frame needs a duration > 0");
+  start_ = end_;
+  end_ = vertices;
+  velocity_ = (end_ - start_) / duration;
+  start_shape_ = end_shape_;
+  end_shape_ = std::move(shape);
+  start_time_ = time;
+  duration_ = duration;
+  bin();
+}
+
+double DeformingSurface::blend(double time) const {
+  if (!(duration_ > 0.0)) return 1.0;
+  return std::clamp((time - start_time_) / duration_, 0.0, 1.0);
+}
+
+SignedDistancePtr DeformingSurface::shape_at(double s) const {
+  if (s >= 1.0 || start_shape_ == end_shape_) return end_shape_;
+  return std::make_shared<BlendedDistance>(start_shape_, end_shape_, s);
+}
+
+double DeformingSurface::reach(const Vec3& center) const {
+  double r = 0.0;
+  for (Eigen::Index k = 0; k < end_.rows(); ++k) {
+    r = std::max({r, (start_.row(k).transpose() - center).norm(), (end_.row(k).transpose() - center).norm()});
+  }
+  return r;
+}
+
+// Cells of about the mean distance between neighbouring vertices: the bounding box's volume
+// shared among the vertices
+void DeformingSurface::bin() {
+  const Vec3 size = (end_.colwise().maxCoeff() - end_.colwise().minCoeff()).transpose();
+  const double volume = std::max(size.prod(), std::pow(std::max(size.maxCoeff(), 1e-6), 3) * 1e-6);
+  cell_ = std::max(std::cbrt(volume / static_cast<double>(end_.rows())), 1e-6);
+  grid_.clear();
+  for (Eigen::Index k = 0; k < end_.rows(); ++k) grid_[key(end_.row(k).transpose(), 0, 0, 0)].push_back(static_cast<int>(k));
+}
+
+std::int64_t DeformingSurface::key(const Vec3& p, int dx, int dy, int dz) const {
+  const auto c = [&](double x, int d) { return static_cast<std::int64_t>(std::floor(x / cell_)) + d + (1 << 20); };
+  return (c(p.x(), dx) << 42) ^ (c(p.y(), dy) << 21) ^ c(p.z(), dz);
+}
+
+Vec3 DeformingSurface::velocity_at(const Vec3& p) const {
+  int best = -1;
+  double nearest = std::numeric_limits<double>::infinity();
+  for (int dx = -1; dx <= 1; ++dx) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dz = -1; dz <= 1; ++dz) {
+        const auto found = grid_.find(key(p, dx, dy, dz));
+        if (found == grid_.end()) continue;
+        for (int k : found->second) {
+          const double d = (end_.row(k).transpose() - p).squaredNorm();
+          if (d < nearest || (d == nearest && k < best)) nearest = d, best = k;
+        }
+      }
+    }
+  }
+  if (best < 0) {  // far from the surface: the nearest of all
+    for (Eigen::Index k = 0; k < end_.rows(); ++k) {
+      const double d = (end_.row(k).transpose() - p).squaredNorm();
+      if (d < nearest) nearest = d, best = static_cast<int>(k);
+    }
+  }
+  return vertex_velocity(best);
+}
+
+// Least squares of v_k = A x_k + c over the vertices: with y_k = (x_k - mean) the centred
+// positions, A = (sum v_k y_k^T) (sum y_k y_k^T)^-1 and c = mean(v) - A mean(x)
+void DeformingSurface::affine_motion(double s, Mat3& A, Vec3& c) const {
+  const Eigen::Index n = end_.rows();
+  Vec3 mean_x = Vec3::Zero(), mean_v = Vec3::Zero();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    mean_x += vertex(static_cast<int>(k), s);
+    mean_v += vertex_velocity(static_cast<int>(k));
+  }
+  mean_x /= static_cast<double>(n);
+  mean_v /= static_cast<double>(n);
+  Mat3 vy = Mat3::Zero(), yy = Mat3::Zero();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const Vec3 y = vertex(static_cast<int>(k), s) - mean_x;
+    vy += (vertex_velocity(static_cast<int>(k)) - mean_v) * y.transpose();
+    yy += y * y.transpose();
+  }
+  // (a flat or degenerate surface: the pseudo-inverse keeps the directions it spans)
+  Eigen::CompleteOrthogonalDecomposition<Mat3> solve(yy);
+  A = vy * solve.pseudoInverse();
+  c = mean_v - A * mean_x;
+}
+
+}  // namespace simbake
