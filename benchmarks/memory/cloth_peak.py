@@ -2,7 +2,7 @@
 
 Each run bakes one square grid (N x N vertices, 2 m, one substep a frame, QA on, .usdc unless
 --usda) for F frames in a fresh Python process, on one thread, and reports that process's own
-peak resident set (resource.getrusage(RUSAGE_SELF).ru_maxrss) beside the estimate of
+peak resident set (VmHWM in /proc/self/status) beside the estimate of
 simbake.limits.estimated_memory for the same bake. Two layouts:
 
     sag    pinned at its four corners: it sags and swings, never folds onto itself
@@ -35,7 +35,7 @@ pinned = {pinned}
 """
 
 RUN = """
-import json, resource, sys
+import json, sys
 from pathlib import Path
 import simbake
 from simbake.assets import load_cloth
@@ -46,7 +46,11 @@ cloths = [(len(a.vertices), crowding(c.thickness, mean_edge(a.vertices, a.triang
           for c, a in zip(scene.cloths, (load_cloth(scene, i) for i in range(len(scene.cloths))))]
 estimate = estimated_memory(scene.frame_count, cloths, 0, Path(sys.argv[2]))
 simbake.bake(scene, sys.argv[2], threads=1)
-print(json.dumps({"estimate": estimate, "peak": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+# the peak of this process's own memory (VmHWM): ru_maxrss would also count the parent's
+# resident set at the fork (a test runner that has baked other scenes, say)
+with open("/proc/self/status") as status:
+    peak = next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmHWM:"))
+print(json.dumps({"estimate": estimate, "peak": peak}))
 """
 
 

@@ -6,7 +6,7 @@ Issue 30's repro was a 500 x 500 cloth estimated 1.95 GiB that peaked at 2.35 GB
 gigabytes; the same model is checked here where it is cheap: a 160 x 160 sheet pinned at its
 four corners, 13 frames, so that its self-collision pairs have appeared (the old estimate
 said 200 MiB, half its peak). The peak is the bake's own process's peak resident set
-(resource.getrusage), in a fresh interpreter, on one thread, as benchmarks/memory/cloth_peak.py
+(VmHWM: not ru_maxrss, which counts the test runner's resident set at the fork), in a fresh interpreter, on one thread, as benchmarks/memory/cloth_peak.py
 measures it for the table in benchmarks/results/memory_estimate.md.
 """
 
