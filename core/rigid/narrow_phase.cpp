@@ -226,8 +226,7 @@ bool NarrowPhase::box_pair_contact(int a, int b, double s, double margin, std::v
   const double trusted = kTrustedDepth * std::min(model_.defs[a].thickness, model_.defs[b].thickness);
   // with speculative contacts an edge contact brings the faces behind it: a tilted box
   // landing edge first turns about that edge within the step, and its face would close on
-  // the other box's with no point of the pair there to stop it (a falling pile's boxes went
-  // 30 mm into each other so)
+  // the other box's with no point of the pair there to stop it
   BoxContact contact, faces;
   if (!box_box_contact(box_a, box_b, margin, contact, margin > 0.0 ? &faces : nullptr)) return true;
   if (contact.depth > trusted) return false;
@@ -248,9 +247,8 @@ bool NarrowPhase::box_pair_contact(int a, int b, double s, double margin, std::v
 
 // A sphere (body a, its shape an exact sphere about its mesh origin) against the ground or
 // body b: one point, the sphere's point nearest b's surface, c - r n, with b's normal n and
-// distance at the centre c (at the candidates). Vertices as samples make a ball a polyhedron,
-// which rolls from face to face and loses a third of its speed a second so (a ball rolling
-// at 1 m/s on the ground kept 0.37 m/s after 3 s). Exact for the ground, a box or a sphere
+// distance at the centre c (at the candidates). Vertices as samples would make a ball a
+// polyhedron, which rolls from face to face and loses speed at every face. Exact for the ground, a box or a sphere
 // (b's distance is exact out to the centre), and for a convex level set within its band;
 // false (the samples then) when the centre is inside b or beyond b's band, or the sphere is
 // deeper than is trusted. True when found here (its point appended, if near enough).

@@ -6,9 +6,9 @@ Within a substep (1/120 s) it travels 58 mm; edge first, it turns about the edge
 and its face closes on the box below within the same step. The overlap is measured
 independently of the solver, by the separating-axis depth of the two boxes
 (benchmarks.peers.scenes.box_overlap, the peer benchmark's measure), at every substep.
-Before the contacts took the faces behind an edge contact (36a2bde) the worst of these cases
-went 13.9 mm deep; now 4.0 mm. The bound, 6 mm, is well inside the 10 mm a pile may reach
-(issue 35) and above the measured worst by half again for round-off in other builds.
+The worst of these cases goes 4.0 mm deep; with only the edge's point for an edge contact
+(no face points behind it) it goes 13.9 mm. The bound, 6 mm, is well inside the 10 mm a pile
+may reach (issue 35) and above the measured worst by half again for round-off in other builds.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Known answers (rolling without slipping, no rolling resistance in the model):
 - on level ground a ball set rolling keeps its speed (energy is conserved: nothing slips,
-  nothing bounces); sampled at its vertices it was a polyhedron and kept 37% over 3 s;
+  nothing bounces); sampled at its vertices it would be a polyhedron, keeping 37% over 3 s;
 - down a 20 degree slope (a kinematic box) a ball starting at rest accelerates at
   a = (5/7) g sin(theta) (a solid sphere, I = 2/5 m r^2; friction 0.5 is above the
   (2/7) tan(theta) = 0.10 that rolling needs), so it travels a t^2 / 2.
