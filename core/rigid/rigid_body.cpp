@@ -44,23 +44,6 @@ Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double
     if (response) *response = def.inverse_inertia[0] * left_jacobian(phi);
     return (quat_from_rotation_vector(phi) * q).normalized();
   }
-  // With moments I_a about the axis a and I_p about both others, H = |L|^2 / (2 I_p) + b_a^2
-  // (1/I_a - 1/I_p) / 2. The first term's flow turns the body about the world's L at |L| / I_p
-  // and leaves b = R^T L as it is; the second's turns it about its own axis a at b_a (1/I_a -
-  // 1/I_p) and leaves L as it is: the two commute, and their composition is the exact motion.
-  // A change dL turns the end by J_l(phi) dt dL / I_p and, through b_a = (q e_a).L, about the
-  // end's own axis a by dt (1/I_a - 1/I_p) (q e_a).dL
-  if (def.symmetry_axis >= 0) {
-    const int a = def.symmetry_axis;
-    const double ip = def.inverse_inertia[(a + 1) % 3], odd = def.inverse_inertia[a] - ip;
-    const Vec3 axis = q * Vec3::Unit(a);
-    const double spin = dt * odd * axis.dot(l);
-    Quat own(std::cos(0.5 * spin), 0.0, 0.0, 0.0);
-    own.coeffs()[a] = std::sin(0.5 * spin);
-    const Quat end = (rotation_and_jacobian(dt * ip * l, response) * q * own).normalized();
-    if (response) *response = ip * *response + odd * (end * Vec3::Unit(a)) * axis.transpose();
-    return end;
-  }
   // In the body frame the angular momentum is b = R^T L. The flow of the k-th term of the
   // Hamiltonian H_k = b_k^2 / (2 I_k) rotates the body about its k-th axis by dt b_k / I_k
   // (q <- q rot_k) and b the opposite way (b <- rot_k^-1 b); b_k itself is unchanged.

@@ -57,9 +57,6 @@ struct RigidBodyDef {
   bool isotropic = false;                    // equal principal moments (a cube, a sphere): the
                                              // torque-free rotation is exact, about L at |L| / I;
                                              // its mesh axes are its principal axes
-  int symmetry_axis = -1;                    // the principal axis of the odd moment when the
-                                             // other two are equal (a square rod, a cylinder):
-                                             // the torque-free rotation is exact; else -1
   SignedDistancePtr shape;                   // signed distance in mesh coordinates; null when
                                              // nothing can touch the body (no grid baked)
   const BoxDistance* box = nullptr;          // the shape when it is a box (exact box contacts)
@@ -127,11 +124,10 @@ inline Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& stat
 // bounded (symplectic, time reversible), and the intermediate-axis instability appears as it
 // should. McLachlan 1993; Touma and Wisdom 1994. A step turning the body more than 0.03 rad
 // about an axis is taken in equal pieces (the error grows with the square of the turn).
-// An isotropic body (def.isotropic) turns exactly, about L at the rate |L| / I, in one rotation;
-// an axisymmetric one (def.symmetry_axis) exactly too, in two (see rigid_body.cpp).
+// An isotropic body (def.isotropic) turns exactly, about L at the rate |L| / I, in one rotation.
 // `response`, when given, takes how the end orientation turns with the angular momentum: the
 // world rotation vector of the change per change of L, over dt (1/(kg m^2)), so that for small
-// turns it is the world inverse inertia; exact for isotropic and axisymmetric bodies, for the
+// turns it is the world inverse inertia; exact for isotropic bodies, for the
 // others the left Jacobian of the step's rotation times the inverse inertia at q
 Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt, Mat3* response = nullptr);
 

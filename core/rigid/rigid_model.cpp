@@ -69,16 +69,6 @@ RigidBodyDef make_body_def(const BodyDesc& desc) {
       def.inertia.setConstant(def.inertia.mean());
       def.isotropic = true;
       def.mesh_axes = Mat3::Identity();  // (every frame is principal: the mesh's own)
-    } else {
-      // two equal to round-off (a square rod): exactly equal, and the rotation exact
-      for (int a = 0; a < 3; ++a) {
-        const int p = (a + 1) % 3, r = (a + 2) % 3;
-        if (std::abs(def.inertia[p] - def.inertia[r]) <= 1e-12 * def.inertia.maxCoeff()) {
-          def.inertia[p] = def.inertia[r] = 0.5 * (def.inertia[p] + def.inertia[r]);
-          def.symmetry_axis = a;
-          break;
-        }
-      }
     }
     def.inverse_inertia = def.inertia.cwiseInverse();
   }

@@ -95,40 +95,10 @@ TEST(RigidBody, StableAxisSpinDoesNotFlip) {
   }
 }
 
-namespace {
-
-RigidBodyDef rod_def(int axis) {
-  // principal moments 0.2 about `axis` and 1.0 about both others (a square rod)
-  RigidBodyDef def;
-  def.inertia = Vec3::Constant(1.0);
-  def.inertia[axis] = 0.2;
-  def.inverse_inertia = def.inertia.cwiseInverse();
-  def.symmetry_axis = axis;
-  return def;
-}
-
-}  // namespace
-
-// The axisymmetric closed form (two rotations) against the general splitting taken in 4000
-// pieces, whose error falls with the square of the piece: the same end within 1e-7 rad after
-// a step turning the rod by ~2 rad
-TEST(RigidBody, AxisymmetricRotationMatchesFineSplitting) {
-  for (int axis = 0; axis < 3; ++axis) {
-    const RigidBodyDef def = rod_def(axis);
-    RigidBodyDef general = def;
-    general.symmetry_axis = -1;
-    const Vec3 l(0.7, -1.1, 0.9);
-    const Quat q0(Eigen::AngleAxisd(0.8, Vec3(1, 2, -1).normalized()));
-    const double dt = 0.5;
-    Quat q = q0;
-    for (int i = 0; i < 4000; ++i) q = free_rotation(general, q, l, dt / 4000);
-    EXPECT_LT(free_rotation(def, q0, l, dt).angularDistance(q), 1e-7) << "axis " << axis;
-  }
-}
-
 // free_rotation's response (how the end turns per change of L, over dt) against central
-// differences of the end itself: exact for isotropic and axisymmetric bodies (1e-6 of it,
-// the differences' own error at h = 1e-5)
+// differences of the end itself: exact for an isotropic body (1e-6 of it, the differences'
+// own error at h = 1e-5); for the brick, taken as a fixed-rate turn, off by less than the
+// step's turn (rad) relative to it
 TEST(RigidBody, RotationResponseMatchesFiniteDifferences) {
   RigidBodyDef ball;
   ball.inertia = Vec3::Constant(0.4);
@@ -136,8 +106,8 @@ TEST(RigidBody, RotationResponseMatchesFiniteDifferences) {
   ball.isotropic = true;
   const Vec3 l(0.7, -1.1, 0.9);
   const Quat q0(Eigen::AngleAxisd(0.8, Vec3(1, 2, -1).normalized()));
-  const double dt = 0.3, h = 1e-5;
-  for (const RigidBodyDef& def : {ball, rod_def(0), rod_def(1), rod_def(2)}) {
+  const double h = 1e-5;
+  for (const auto& [def, dt] : {std::pair{ball, 0.3}, std::pair{brick_def(), 0.05}}) {
     Mat3 response;
     const Quat end = free_rotation(def, q0, l, dt, &response);
     Mat3 differences;
@@ -147,6 +117,14 @@ TEST(RigidBody, RotationResponseMatchesFiniteDifferences) {
       differences.col(k) = (rotation_vector_from_quat(plus * end.conjugate()) -
                             rotation_vector_from_quat(minus * end.conjugate())) / (2.0 * h * dt);
     }
-    EXPECT_LT((response - differences).norm(), 1e-6 * response.norm()) << "axis " << def.symmetry_axis;
+    const double turn = end.angularDistance(q0);
+    const double error = (response - differences).norm() / differences.norm();
+    if (def.isotropic) {
+      EXPECT_LT(error, 1e-6);
+    } else {
+      EXPECT_GT(turn, 0.05);
+      EXPECT_LT(error, turn);
+    }
+    std::printf("rotation response (%s): step turn %.3f rad, relative error %.2e\n", def.isotropic ? "ball" : "brick", turn, error);
   }
 }
