@@ -305,6 +305,7 @@ void bind_settings(py::module_& m) {
       .def_readwrite("cloth_contacts_in_solve", &WorldSettings::cloth_contacts_in_solve)
       .def_readwrite("cloth_max_substep", &WorldSettings::cloth_max_substep)
       .def_readwrite("travel_fraction", &WorldSettings::travel_fraction)
+      .def_readwrite("joint_turn", &WorldSettings::joint_turn)
       .def_readwrite("max_substeps", &WorldSettings::max_substeps)
       .def_readwrite("threads", &WorldSettings::threads);
   keyword_struct(settings);

@@ -45,4 +45,32 @@ inline Vec3 rotation_vector_from_quat(Quat q) {
   return v * (angle / s);
 }
 
+// The rotation by the rotation vector phi (angle t = |phi|) and, when asked, its left
+// Jacobian: exp(phi + d) = exp(J d) exp(phi) to first order in d, J = I + (1 - cos t) / t^2
+// [phi]x + (t - sin t) / t^3 [phi]x^2; from one sine and cosine of t / 2
+inline Quat rotation_and_jacobian(const Vec3& phi, Mat3* jacobian) {
+  const double t2 = phi.squaredNorm();
+  const double t = std::sqrt(t2);
+  const double s = std::sin(0.5 * t), c = std::cos(0.5 * t);
+  const Quat q = t < 1e-300 ? Quat::Identity() : Quat(c, s * phi.x() / t, s * phi.y() / t, s * phi.z() / t);
+  if (jacobian) {
+    double a, b;  // (1 - cos t) / t^2 = 2 s^2 / t^2 and (t - sin t) / t^3, by their series near 0
+    if (t2 < 1e-8) {
+      a = 0.5 - t2 / 24.0;
+      b = 1.0 / 6.0 - t2 / 120.0;
+    } else {
+      a = 2.0 * s * s / t2;
+      b = (t - 2.0 * s * c) / (t2 * t);
+    }
+    const Mat3 k = skew(phi);
+    *jacobian = Mat3::Identity() + a * k + b * (k * k);
+  }
+  return q;
+}
+inline Mat3 left_jacobian(const Vec3& phi) {
+  Mat3 jacobian;
+  rotation_and_jacobian(phi, &jacobian);
+  return jacobian;
+}
+
 }  // namespace simbake

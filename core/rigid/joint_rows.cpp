@@ -90,18 +90,27 @@ JointFrames joint_frames(const JointDef& def, const BodyPose& pose0, const BodyP
   f.p1 = pose1.x + f.r1;
   f.f0 = (pose0.q * def.frame0).normalized();
   f.f1 = (pose1.q * def.frame1).normalized();
+  f.axes0 = f.f0.toRotationMatrix();
   return f;
 }
 
-JointCoordinates joint_coordinates(const JointFrames& f) {
+namespace {
+constexpr unsigned bit(RowCoordinate coordinate) { return 1u << static_cast<unsigned>(coordinate); }
+}  // namespace
+
+JointCoordinates joint_coordinates(const JointFrames& f, unsigned needed) {
   JointCoordinates c;
   const Vec3 d = f.p1 - f.p0;
-  c.offset = f.f0.conjugate() * d;
+  c.offset = f.axes0.transpose() * d;
   c.distance = d.norm();
+  constexpr unsigned kTurns = bit(RowCoordinate::kRotation) | bit(RowCoordinate::kAlignment) | bit(RowCoordinate::kTwist) |
+                              bit(RowCoordinate::kSwing) | bit(RowCoordinate::kCone);
+  if (!(needed & kTurns)) return c;
   Quat rel = (f.f0.conjugate() * f.f1).normalized();
   if (rel.w() < 0.0) rel.coeffs() = -rel.coeffs();
-  c.rotation = rotation_vector_from_quat(rel);
-  c.alignment = Vec3::UnitX().cross(rel * Vec3::UnitX());
+  if (needed & bit(RowCoordinate::kRotation)) c.rotation = rotation_vector_from_quat(rel);
+  if (needed & bit(RowCoordinate::kAlignment)) c.alignment = Vec3::UnitX().cross(rel * Vec3::UnitX());
+  if (!(needed & (bit(RowCoordinate::kTwist) | bit(RowCoordinate::kSwing) | bit(RowCoordinate::kCone)))) return c;
   // swing-twist: rel = swing twist, twist about X
   const double norm = std::hypot(rel.w(), rel.x());
   const Quat twist = norm > 1e-12 ? Quat(rel.w() / norm, rel.x() / norm, 0.0, 0.0) : Quat::Identity();
@@ -109,6 +118,45 @@ JointCoordinates joint_coordinates(const JointFrames& f) {
   c.swing = rotation_vector_from_quat(rel * twist.conjugate());
   c.swing.x() = 0.0;
   return c;
+}
+
+unsigned needed_coordinates(const JointRow* rows, int count) {
+  unsigned needed = 0;
+  for (int r = 0; r < count; ++r) needed |= bit(rows[r].coordinate);
+  return needed;
+}
+
+void set_row_jacobian(const JointFrames& f, const JointCoordinates& c, JointRow& row) {
+  const auto translation = [&](const Vec3& u) {
+    const Vec3 d = f.p1 - f.p0;
+    row.linear[0] = -u;
+    row.angular[0] = -(f.r0 + d).cross(u);
+    row.linear[1] = u;
+    row.angular[1] = f.r1.cross(u);
+  };
+  switch (row.coordinate) {
+    case RowCoordinate::kTrans:
+      translation(f.axes0.col(row.axis));
+      return;
+    case RowCoordinate::kDistance: {
+      const Vec3 n = c.distance > 1e-12 ? Vec3((f.p1 - f.p0) / c.distance) : Vec3(f.f0 * Vec3::UnitX());
+      translation(n);
+      row.angular[0] = -f.r0.cross(n);  // (d along n)
+      return;
+    }
+    case RowCoordinate::kRotation:
+    case RowCoordinate::kAlignment:
+    case RowCoordinate::kTwist:
+    case RowCoordinate::kSwing: {
+      const Vec3 n = f.axes0.col(row.axis);
+      row.linear[0] = row.linear[1] = Vec3::Zero();
+      row.angular[0] = -n;
+      row.angular[1] = n;
+      return;
+    }
+    case RowCoordinate::kCone:
+      return;
+  }
 }
 
 double row_coordinate(const JointRow& row, const JointCoordinates& c) {
@@ -148,7 +196,7 @@ void append_joint_rows(const JointDef& def, int j, const JointFrames& f, const J
                                def.max_distance}, {}, rows);
   } else {
     for (int k = 0; k < 3; ++k) {
-      const JointRow row = translation_row(j, RowCoordinate::kTrans, k, f, f.f0 * Vec3::Unit(k), side);
+      const JointRow row = translation_row(j, RowCoordinate::kTrans, k, f, f.axes0.col(k), side);
       push_coordinate_rows(row, def.dofs[kTransX + k], def.drives[kTransX + k], rows);
     }
   }
@@ -157,16 +205,16 @@ void append_joint_rows(const JointDef& def, int j, const JointFrames& f, const J
   for (int k = 0; k < 3; ++k) locked += def.dofs[kRotX + k].motion == DofMotion::kLocked;
   if (locked == 3) {
     for (int k = 0; k < 3; ++k) {
-      push_coordinate_rows(rotation_row(j, RowCoordinate::kRotation, k, f.f0 * Vec3::Unit(k), side),
+      push_coordinate_rows(rotation_row(j, RowCoordinate::kRotation, k, f.axes0.col(k), side),
                            def.dofs[kRotX + k], {}, rows);
     }
   } else {
     const bool hinge = locked == 2;
-    push_coordinate_rows(rotation_row(j, RowCoordinate::kTwist, 0, f.f0 * Vec3::UnitX(), side), def.dofs[kRotX],
+    push_coordinate_rows(rotation_row(j, RowCoordinate::kTwist, 0, f.axes0.col(0), side), def.dofs[kRotX],
                          def.drives[kRotX], rows);
     for (int k = 1; k < 3; ++k) {
       const RowCoordinate coordinate = hinge ? RowCoordinate::kAlignment : RowCoordinate::kSwing;
-      push_coordinate_rows(rotation_row(j, coordinate, k, f.f0 * Vec3::Unit(k), side), def.dofs[kRotX + k],
+      push_coordinate_rows(rotation_row(j, coordinate, k, f.axes0.col(k), side), def.dofs[kRotX + k],
                            hinge ? JointDrive{} : def.drives[kRotX + k], rows);
     }
     if (def.cone) {

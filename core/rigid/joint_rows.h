@@ -20,6 +20,7 @@ struct BodyPose {
 struct JointFrames {
   Vec3 p0, p1;                  // frame origins, world (m)
   Quat f0, f1;                  // frame axes -> world
+  Mat3 axes0;                   // f0 as a matrix: frame 0's axes in the world, as columns
   Vec3 r0, r1;                  // lever arms from each body's centre of mass (m)
 };
 
@@ -35,7 +36,8 @@ struct JointCoordinates {
   Vec3 swing = Vec3::Zero();    // rotation vector of the swing (f0^-1 f1 = swing twist), x = 0
 };
 
-JointCoordinates joint_coordinates(const JointFrames& frames);
+// Which coordinates to measure (bits of 1 << RowCoordinate); all by default
+JointCoordinates joint_coordinates(const JointFrames& frames, unsigned needed = ~0u);
 
 // What a row holds
 enum class RowKind : int {
@@ -74,6 +76,14 @@ double row_coordinate(const JointRow& row, const JointCoordinates& c);
 // (set_drive_compliance). Rows of a degree of freedom that is free and undriven are not made
 void append_joint_rows(const JointDef& def, int j, const JointFrames& frames, const JointCoordinates& start,
                        const int side[2], std::vector<JointRow>& rows);
+
+// The coordinates a joint's rows measure (the bits joint_coordinates takes)
+unsigned needed_coordinates(const JointRow* rows, int count);
+
+// Row `row`'s Jacobian (linear, angular) at frames `frames` with coordinates `c` (the
+// rows append_joint_rows would make there): how the Newton iterations' measured
+// coordinates move. A cone row keeps its own (aimed at the start, aim_cone_row)
+void set_row_jacobian(const JointFrames& frames, const JointCoordinates& c, JointRow& row);
 
 // The cone's half-angle along a swing (rad)
 double cone_limit(const JointDef& def, const Vec3& swing);

@@ -28,8 +28,6 @@
 
 #include "rigid/sleeping.h"
 
-#include <Eigen/SparseLU>
-#include <Eigen/SparseCore>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -42,7 +40,15 @@ namespace {
 constexpr int kIterations = 16;         // Newton iterations per step, at most
 constexpr double kTolerance = 1e-10;    // (m, rad) error at which a step's solve stops early
 constexpr double kDivergence = 1e-6;    // (m, rad) an error this small never counts as diverging
-constexpr double kRegularization = 1e-5;  // relative to A's diagonal: redundant rows stay solvable
+// relative to A's diagonal: where joints close a loop their rows are redundant, and stay
+// solvable; a tree's are independent, and its tiny regularization only guards the pivots
+// (any regularization slows Newton to a linear rate of about itself times A's condition,
+// which a 50-link chain makes thousands)
+constexpr double kLoopRegularization = 1e-5;
+// a Newton step on the last factorization (its Jacobian a step old) is kept while it takes
+// the error down at least this much; a slower one asks for a fresh factorization
+constexpr double kChordRate = 0.05;
+constexpr double kTreeRegularization = 1e-9;
 
 bool dynamic_body(const RigidModel& model, int i) { return i != kWorldBody && !model.defs[i].kinematic; }
 
@@ -161,13 +167,13 @@ struct ComponentSolver {
     c.start.resize(nb);
     c.candidate.resize(nb);
     c.inverse_inertia.resize(nb);
-    c.body_rows.resize(nb);
     for (int i = 0; i < nb; ++i) {
       const int g = c.bodies[i];
       c.start[i] = {data.x[g], data.q[g]};
       c.inverse_inertia[i] = world_inverse_inertia(model.defs[g], data.q[g]);
     }
     c.rows.clear();
+    c.row_begin.assign(1, 0);
     c.frames.resize(c.joints.size());
     for (std::size_t k = 0; k < c.joints.size(); ++k) {
       const JointDef& def = model.joints[c.joints[k]];
@@ -181,6 +187,55 @@ struct ComponentSolver {
         if (c.rows[r].kind != RowKind::kDrive) continue;
         const int dof = c.rows[r].coordinate == RowCoordinate::kTrans ? kTransX + c.rows[r].axis : kRotX + c.rows[r].axis;
         set_drive_compliance(def.drives[dof], coupling(c.rows[r], c.rows[r]), h, c.rows[r]);
+      }
+      c.row_begin.push_back(static_cast<int>(c.rows.size()));
+    }
+    c.drives = std::any_of(c.rows.begin(), c.rows.end(), [](const JointRow& row) { return row.kind == RowKind::kDrive; });
+    c.needed.resize(c.joints.size());
+    for (std::size_t k = 0; k < c.joints.size(); ++k) {
+      c.needed[k] = needed_coordinates(c.rows.data() + c.row_begin[k], c.row_begin[k + 1] - c.row_begin[k]);
+    }
+    analyze_pattern();
+  }
+
+  // The system's pattern, when the component's joints or their rows changed: a node per
+  // joint, a block per pair of joints on one body
+  void analyze_pattern() {
+    const int nj = static_cast<int>(c.joints.size());
+    std::vector<int> sizes(nj);
+    for (int k = 0; k < nj; ++k) sizes[k] = c.row_begin[k + 1] - c.row_begin[k];
+    if (c.pattern_joints == c.joints && c.pattern_rows == sizes) return;
+    c.pattern_joints = c.joints;
+    c.pattern_rows = sizes;
+    const int nb = static_cast<int>(c.bodies.size());
+    c.joints_at.assign(nb, {});
+    for (int k = 0; k < nj; ++k) {
+      const JointDef& def = model.joints[c.joints[k]];
+      for (int g : {def.body0, def.body1}) {
+        if (g != kWorldBody && js.local[g] >= 0) c.joints_at[js.local[g]].push_back(k);
+      }
+    }
+    std::vector<std::pair<int, int>> adjacent;
+    for (const std::vector<int>& at : c.joints_at) {
+      for (std::size_t a = 0; a < at.size(); ++a) {
+        for (std::size_t b = a + 1; b < at.size(); ++b) adjacent.push_back({at[a], at[b]});
+      }
+    }
+    c.system.analyze(sizes, adjacent);
+    // a loop: more joints than a tree of the bodies and the immovable ones (the world and
+    // kinematic bodies, counted as one) would have
+    bool immovable = false;
+    for (int k = 0; k < nj; ++k) {
+      const JointDef& def = model.joints[c.joints[k]];
+      immovable = immovable || !dynamic_body(model, def.body0) || !dynamic_body(model, def.body1);
+    }
+    c.loops = nj > nb - 1 + (immovable ? 1 : 0);
+    c.regularization = c.loops ? kLoopRegularization : kTreeRegularization;
+    c.block_at.assign(nb, {});
+    const double* base = c.system.data();
+    for (int i = 0; i < nb; ++i) {
+      for (int a : c.joints_at[i]) {
+        for (int b : c.joints_at[i]) c.block_at[i].push_back(static_cast<int>(c.system.block(a, b) - base));
       }
     }
   }
@@ -222,39 +277,37 @@ struct ComponentSolver {
   }
 
   void predict() {
+    c.rotation_response.resize(c.bodies.size());
     for (std::size_t i = 0; i < c.bodies.size(); ++i) {
       const int g = c.bodies[i];
-      c.candidate[i] = {data.x[g] + h * data.v[g], free_rotation(model.defs[g], data.q[g], data.l[g], h)};
+      c.candidate[i] = {data.x[g] + h * data.v[g], free_rotation(model.defs[g], data.q[g], data.l[g], h, &c.rotation_response[i])};
     }
   }
 
   // Which rows take part in this iteration, and what each asks; the largest error left
   double gather(bool first) {
-    std::vector<JointCoordinates> at(c.joints.size());
-    c.measured.clear();
+    std::vector<JointCoordinates>& at = c.coordinates;
+    at.resize(c.joints.size());
+    c.end_frames.resize(c.joints.size());
     for (std::size_t k = 0; k < c.joints.size(); ++k) {
       const JointDef& def = model.joints[c.joints[k]];
-      const JointFrames frames = joint_frames(def, pose(def.body0, true), pose(def.body1, true));
-      at[k] = joint_coordinates(frames);
-      // (the rows' Jacobians where the bodies end the step: how the measured coordinates move)
-      const int side[2] = {-1, -1};
-      append_joint_rows(def, static_cast<int>(k), frames, at[k], side, c.measured);
+      c.end_frames[k] = joint_frames(def, pose(def.body0, true), pose(def.body1, true));
+      at[k] = joint_coordinates(c.end_frames[k], c.needed[k]);
     }
-    c.active.clear();
-    c.residual.clear();
+    if (first) {
+      for (JointRow& row : c.rows) {
+        if (row.coordinate == RowCoordinate::kCone) aim_cone_row(model.joints[c.joints[row.joint]], c.frames[row.joint], at[row.joint], row);
+      }
+      c.measured = c.rows;
+    }
+    c.in_solve.assign(c.rows.size(), 0);
+    c.residual.assign(c.rows.size(), 0.0);
     double worst = 0.0;
     for (int r = 0; r < static_cast<int>(c.rows.size()); ++r) {
       JointRow& row = c.rows[r];
-      if (first && row.coordinate == RowCoordinate::kCone) {
-        aim_cone_row(model.joints[c.joints[row.joint]], c.frames[row.joint], at[row.joint], row);
-      }
-      JointRow& moved = c.measured[r];
-      if (row.kind == RowKind::kDrive || row.coordinate == RowCoordinate::kCone) {  // (J at the start)
-        moved.linear[0] = row.linear[0];
-        moved.linear[1] = row.linear[1];
-        moved.angular[0] = row.angular[0];
-        moved.angular[1] = row.angular[1];
-      }
+      // the rows' Jacobians where the bodies end the step: how the measured coordinates move
+      // (a drive's and a cone's: at the start)
+      if (row.kind != RowKind::kDrive) set_row_jacobian(c.end_frames[row.joint], at[row.joint], c.measured[r]);
       double wanted;
       if (row.kind == RowKind::kDrive) {
         if (row.clamped) continue;
@@ -268,110 +321,154 @@ struct ComponentSolver {
         wanted = -e / h;
         worst = std::max(worst, std::abs(e));
       }
-      c.active.push_back(r);
-      c.residual.push_back(wanted);
+      c.in_solve[r] = 1;
+      c.residual[r] = wanted;
     }
     return worst;
   }
 
-  // The LU of A: its pattern analysed again only when it differs from the last one's (the
-  // ordering depends on the pattern alone, so the factors are the same bits either way)
-  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>& factor(const Eigen::SparseMatrix<double>& A) {
-    const int* outer = A.outerIndexPtr();
-    const int* inner = A.innerIndexPtr();
-    const bool same = c.lu && static_cast<Eigen::Index>(c.pattern_outer.size()) == A.outerSize() + 1 &&
-                      static_cast<Eigen::Index>(c.pattern_inner.size()) == A.nonZeros() &&
-                      std::equal(c.pattern_outer.begin(), c.pattern_outer.end(), outer) &&
-                      std::equal(c.pattern_inner.begin(), c.pattern_inner.end(), inner);
-    if (!same) {
-      if (!c.lu) c.lu = std::make_unique<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>>>();
-      c.lu->analyzePattern(A);
-      c.pattern_outer.assign(outer, outer + A.outerSize() + 1);
-      c.pattern_inner.assign(inner, inner + A.nonZeros());
-    }
-    c.lu->factorize(A);
-    return *c.lu;
-  }
-
-  // A dlambda = residual over the active rows, solved and applied within the rows' bounds
-  void solve(bool first) {
-    const int m = static_cast<int>(c.active.size());
-    c.step.assign(c.rows.size(), 0.0);
-    if (m == 0) return;
-    std::vector<int> slot(c.rows.size(), -1);
-    for (auto& list : c.body_rows) list.clear();
-    for (int k = 0; k < m; ++k) {
-      slot[c.active[k]] = k;
-      for (int side : c.rows[c.active[k]].side) {
-        if (side >= 0) c.body_rows[side].push_back(c.active[k]);
+  // A dlambda = residual over the rows in the solve, solved and applied within the rows' bounds
+  void solve(bool first, bool refactor) {
+    const int m = static_cast<int>(c.rows.size());
+    c.step.assign(m, 0.0);
+    if (std::find(c.in_solve.begin(), c.in_solve.end(), 1) == c.in_solve.end()) return;
+    std::vector<double>& b = c.rhs;
+    std::vector<double>& delta = c.delta;
+    std::vector<char>& bounded = c.bounded;
+    b = c.residual;
+    bounded.assign(m, 0);
+    // The last factorization again (a chord step), while it is of the same rows and no drive
+    // of it was held at its bound: the Newton loop asks for a fresh one when the error stops
+    // falling fast
+    bool fresh = refactor || !c.factored || c.factored_rows != c.in_solve || c.factored_bounded;
+    if (!fresh) {
+      delta = b;
+      c.system.solve(delta.data());
+      for (int r = 0; r < m && !fresh; ++r) {
+        if (!std::isfinite(delta[r])) fresh = true;
+        if (c.in_solve[r] && c.rows[r].kind == RowKind::kDrive && std::abs(c.rows[r].impulse + delta[r]) > c.rows[r].max_impulse) fresh = true;
       }
     }
-    // A = J_end M^-1 J_start^T: how each row's coordinate at the end of the step moves with
-    // each row's impulse (not symmetric once the bodies turn in the step; with a mass ratio
-    // of 1000 the light bodies' turn matters even when it is small), summed over the bodies
-    // two rows share, with the drives' compliance and a little regularization on the diagonal.
-    // The first iteration, which finds nearly all of the impulse, takes the symmetric J_start
-    // M^-1 J_start^T: where joints close loops (a glued wall) the rows are redundant, and the
-    // regularized symmetric system gives the impulses of least norm instead of arbitrary
-    // self-cancelling ones, so that what each joint carries (its break test) is meaningful
-    std::vector<Eigen::Triplet<double>> entries;
-    for (int k = 0; k < m; ++k) {
-      const JointRow& row = c.rows[c.active[k]];
-      entries.emplace_back(k, k, coupling(row, row) * kRegularization + row.compliance);
-    }
-    for (int i = 0; i < static_cast<int>(c.body_rows.size()); ++i) {
-      for (int r : c.body_rows[i]) {
-        JointRow moved = first ? c.rows[r] : c.measured[r];
-        moved.side[0] = c.rows[r].side[0];
-        moved.side[1] = c.rows[r].side[1];
-        for (int s : c.body_rows[i]) entries.emplace_back(slot[r], slot[s], coupling_at(moved, c.rows[s], i));
-      }
-    }
-    // A drive that would pass its bound is held at it (its row of A becomes the identity, its
-    // right-hand side the impulse that reaches the bound) and the system solved again, so that
-    // the other rows' impulses are those for the bounded drive, not the unbounded one (taking
-    // those gave a wheel glued to a bar half its drive's torque, after the line search)
-    Eigen::VectorXd b = Eigen::Map<const Eigen::VectorXd>(c.residual.data(), m);
-    std::vector<char> bounded(m, 0);
-    Eigen::VectorXd delta;
-    for (int attempt = 0; attempt <= m; ++attempt) {
-      Eigen::SparseMatrix<double> A(m, m);
-      A.setFromTriplets(entries.begin(), entries.end());
-      A.makeCompressed();
-      auto& lu = factor(A);
-      if (lu.info() != Eigen::Success) return;
-      delta = lu.solve(b);
-      if (!delta.allFinite()) return;
-      bool more = false;
-      for (int k = 0; k < m; ++k) {
-        const JointRow& row = c.rows[c.active[k]];
-        if (row.kind != RowKind::kDrive || bounded[k] || std::abs(row.impulse + delta[k]) <= row.max_impulse) continue;
-        bounded[k] = 1;
-        more = true;
-        b[k] = std::clamp(row.impulse + delta[k], -row.max_impulse, row.max_impulse) - row.impulse;
-      }
-      if (!more) break;
-      std::vector<Eigen::Triplet<double>> kept;
-      for (const auto& t : entries) {
-        if (!bounded[t.row()]) kept.push_back(t);
-      }
-      for (int k = 0; k < m; ++k) {
-        if (bounded[k]) kept.emplace_back(k, k, 1.0);
-      }
-      entries.swap(kept);
-    }
-    for (int k = 0; k < m; ++k) {
-      JointRow& row = c.rows[c.active[k]];
-      double total = row.impulse + delta[k];
-      if (bounded[k]) {
+    if (fresh && !factor_and_solve(first)) return;
+    for (int r = 0; r < m; ++r) {
+      if (!c.in_solve[r]) continue;
+      JointRow& row = c.rows[r];
+      double total = row.impulse + delta[r];
+      if (bounded[r]) {
         total = std::clamp(total, -row.max_impulse, row.max_impulse);
         row.clamped = true;
       }
       if (row.kind == RowKind::kLower) total = std::max(total, 0.0);
       if (row.kind == RowKind::kUpper) total = std::min(total, 0.0);
-      c.step[c.active[k]] = total - row.impulse;
+      c.step[r] = total - row.impulse;
       apply(row, total - row.impulse);
     }
+  }
+
+  // A assembled and factored, and solved; a drive that would pass its bound is held at it
+  // (its row of A becomes the identity, its right-hand side the impulse that reaches the
+  // bound) and the system solved again, so that the other rows' impulses are those for the
+  // bounded drive, not the unbounded one (taking those gave a wheel glued to a bar half its
+  // drive's torque, after the line search). False if it cannot be solved
+  bool factor_and_solve(bool first) {
+    const int m = static_cast<int>(c.rows.size());
+    std::vector<double>& b = c.rhs;
+    std::vector<double>& delta = c.delta;
+    std::vector<char>& bounded = c.bounded;
+    c.factored = false;
+    assemble(first);
+    for (int attempt = 0; attempt <= m; ++attempt) {
+      if (attempt > 0) c.system.set_values(c.assembled);
+      for (int r = 0; r < m; ++r) {
+        if (!c.in_solve[r] || bounded[r]) set_unit_row(r);
+      }
+      if (!c.system.factorize()) return false;
+      delta = b;
+      c.system.solve(delta.data());
+      for (double d : delta) {
+        if (!std::isfinite(d)) return false;
+      }
+      bool more = false;
+      for (int r = 0; r < m; ++r) {
+        const JointRow& row = c.rows[r];
+        if (!c.in_solve[r] || row.kind != RowKind::kDrive || bounded[r] || std::abs(row.impulse + delta[r]) <= row.max_impulse) continue;
+        bounded[r] = 1;
+        more = true;
+        b[r] = std::clamp(row.impulse + delta[r], -row.max_impulse, row.max_impulse) - row.impulse;
+      }
+      if (!more) break;
+    }
+    c.factored = true;
+    c.factored_rows = c.in_solve;
+    c.factored_bounded = std::find(bounded.begin(), bounded.end(), 1) != bounded.end();
+    return true;
+  }
+
+  // Row r of the system the identity's (a row out of the solve: its impulse stays)
+  void set_unit_row(int r) {
+    const int k = c.rows[r].joint;
+    c.system.set_unit_row(k, r - c.row_begin[k]);
+  }
+
+  // A = J_end M^-1 J_start^T: how each row's coordinate at the end of the step moves with
+  // each row's impulse (not symmetric once the bodies turn in the step; with a mass ratio
+  // of 1000 the light bodies' turn matters even when it is small), M^-1's angular part the
+  // candidate rotation's own response to L (free_rotation: a link turning a radian
+  // in a step turns a third less per unit of L than I^-1 says), summed over the bodies
+  // two rows share, with the drives' compliance and a little regularization on the diagonal.
+  // The first iteration, which finds nearly all of the impulse, takes the symmetric J_start
+  // M^-1 J_start^T: where joints close loops (a glued wall) the rows are redundant, and the
+  // regularized symmetric system gives the impulses of least norm instead of arbitrary
+  // self-cancelling ones, so that what each joint carries (its break test) is meaningful.
+  // Rows out of the solve are left zero here (set_unit_row makes them the identity's)
+  void assemble(bool first) {
+    const int m = static_cast<int>(c.rows.size());
+    c.system.set_zero();
+    double* values = c.system.data();
+    // each row's M^-1 J^T on each of its sides
+    c.response.resize(4 * m);
+    for (int r = 0; r < m; ++r) {
+      const JointRow& row = c.rows[r];
+      for (int s = 0; s < 2; ++s) {
+        if (row.side[s] < 0) continue;
+        c.response[4 * r + 2 * s] = inverse_mass(row.side[s]) * row.linear[s];
+        c.response[4 * r + 2 * s + 1] =
+            (first ? c.inverse_inertia[row.side[s]] : c.rotation_response[row.side[s]]) * row.angular[s];
+      }
+    }
+    for (int i = 0; i < static_cast<int>(c.bodies.size()); ++i) {
+      const std::vector<int>& at = c.joints_at[i];
+      const int na = static_cast<int>(at.size());
+      for (int a = 0; a < na; ++a) {
+        const int ka = at[a];
+        for (int r = c.row_begin[ka]; r < c.row_begin[ka + 1]; ++r) {
+          if (!c.in_solve[r]) continue;
+          const JointRow& e = first ? c.rows[r] : c.measured[r];
+          const int se = c.rows[r].side[0] == i ? 0 : 1;
+          const Vec3& e_linear = e.linear[se];
+          const Vec3& e_angular = e.angular[se];
+          for (int b = 0; b < na; ++b) {
+            const int kb = at[b];
+            const int cols = c.row_begin[kb + 1] - c.row_begin[kb];
+            double* out = values + c.block_at[i][a * na + b] + (r - c.row_begin[ka]) * cols;
+            for (int s = c.row_begin[kb]; s < c.row_begin[kb + 1]; ++s) {
+              const int ss = c.rows[s].side[0] == i ? 0 : 1;
+              out[s - c.row_begin[kb]] +=
+                  e_linear.dot(c.response[4 * s + 2 * ss]) + e_angular.dot(c.response[4 * s + 2 * ss + 1]);
+            }
+          }
+        }
+      }
+    }
+    for (int r = 0; r < m; ++r) {
+      if (!c.in_solve[r]) continue;
+      const JointRow& row = c.rows[r];
+      const int k = row.joint;
+      const int n = c.row_begin[k + 1] - c.row_begin[k];
+      c.system.block(k, k)[(r - c.row_begin[k]) * (n + 1)] += coupling(row, row) * c.regularization + row.compliance;
+    }
+    // (kept for a second attempt, should a drive reach its bound)
+    if (c.drives) c.assembled = c.system.values();
   }
 
   // The joint's force and torque on body 1 over the step (N, N m) from its rows' impulses
@@ -399,13 +496,16 @@ void solve_joints(const RigidModel& model, RigidData& data, JointScratch& js, do
     ComponentSolver solver{model, data, js, js.components[k], dt};
     solver.begin();
     // Newton iterations; the best iterate is kept (where the bodies turn too far in a step
-    // for the linearization an iteration can make things worse)
     // for the linearization an iteration can make things worse: its step is then halved, a
     // line search on the impulses)
-    double best = kUnlimited, alpha = 1.0;
+    double best = kUnlimited, alpha = 1.0, last = kUnlimited;
+    solver.c.factored = false;
     for (int iteration = 0; iteration <= kIterations; ++iteration) {
       solver.predict();
       const double worst = solver.gather(iteration == 0);
+      // (a chord step that took the error down by less than this asks for a fresh factorization)
+      const bool refactor = !(worst < kChordRate * last);
+      last = worst;
       if (worst < best) {
         best = worst;
         alpha = 1.0;
@@ -417,12 +517,16 @@ void solve_joints(const RigidModel& model, RigidData& data, JointScratch& js, do
         solver.retake(alpha);
         continue;
       }
-      if ((worst <= kTolerance && iteration > 0) || iteration == kIterations) break;
-      solver.solve(iteration == 0);
+      if (worst <= kTolerance || iteration == kIterations) break;
+      // (where joints close loops the first solve is the symmetric one: see assemble)
+      solver.solve(iteration == 0 && solver.c.loops, refactor);
     }
     solver.restore();
     solver.record_loads();
+    solver.c.error = best;
   });
+  js.error = 0.0;
+  for (int k = 0; k < js.count; ++k) js.error = std::max(js.error, js.components[k].error);
   // breaking, in joint order
   for (int k = 0; k < js.count; ++k) {
     for (int j : js.components[k].joints) {

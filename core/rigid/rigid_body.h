@@ -125,7 +125,11 @@ inline Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& stat
 // should. McLachlan 1993; Touma and Wisdom 1994. A step turning the body more than 0.03 rad
 // about an axis is taken in equal pieces (the error grows with the square of the turn).
 // An isotropic body (def.isotropic) turns exactly, about L at the rate |L| / I, in one rotation.
-Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt);
+// `response`, when given, takes how the end orientation turns with the angular momentum: the
+// world rotation vector of the change per change of L, over dt (1/(kg m^2)), so that for small
+// turns it is the world inverse inertia; exact for isotropic bodies, for the
+// others the left Jacobian of the step's rotation times the inverse inertia at q
+Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt, Mat3* response = nullptr);
 
 // Rotation of a kinematic body spinning at a fixed world angular velocity omega over dt
 Quat prescribed_rotation(const Quat& q, const Vec3& omega, double dt);

@@ -3,7 +3,14 @@
 // Bodies. Each body may travel a fraction of its thickness per substep (no tunnelling
 // through its own thinnest part), nor more than twice that fraction of the scene's thinnest
 // body (no tunnelling through a thin post or plate); its speed over the frame is bounded by
-// the current speed of its fastest point plus what gravity adds in one frame. The ceiling
+// the current speed of its fastest point plus what gravity adds in one frame. In a world
+// where nothing can collide (no ground, no body with a shape) there is nothing to tunnel
+// through and the rule does not apply. A jointed body turns at most joint_turn per substep:
+// its joints are held at the end of each step by Newton iterations on the rotated frames,
+// which converge less surely the further the step turns it (a whipping chain's tip link
+// turns hundreds of radians a second); since a whip speeds up within a frame, the world
+// checks the turn again after every substep and shortens the rest of the frame's steps
+// (World::step_frame). The ceiling
 // max_substep applies where bodies interact; with no dynamic body, kinematic bodies need only
 // as many steps as their travel (and the cloths) ask for. A bounce is resolved at the step
 // whose candidate first enters, so its apex errs by up to the fall over a step: while any
@@ -45,11 +52,22 @@ class BodySpeeds {
   BodySpeeds(const RigidModel& model, const RigidData& data, const WorldSettings& settings, double time, double frame_dt)
       : model_(model), data_(data), settings_(settings), time_(time), frame_dt_(frame_dt) {}
 
-  // (m), infinite with no body
+  // (m), of the bodies something can touch (with a shape); infinite with none
   double thinnest_body() const {
     double thinnest = std::numeric_limits<double>::infinity();
-    for (const RigidBodyDef& def : model_.defs) thinnest = std::min(thinnest, def.thickness);
+    for (const RigidBodyDef& def : model_.defs) {
+      if (def.shape) thinnest = std::min(thinnest, def.thickness);
+    }
     return thinnest;
+  }
+
+  // whether anything can collide: a ground, or a body something can touch
+  bool collidable() const {
+    if (model_.ground) return true;
+    for (const RigidBodyDef& def : model_.defs) {
+      if (def.shape) return true;
+    }
+    return false;
   }
 
   // the speed (m/s) of body i's fastest point over the frame: its velocities now or, for a
@@ -72,6 +90,7 @@ class BodySpeeds {
   // of the kinematic bodies near that box only (as kinematic_speed_near judges near)
   double body_travel_steps(double thinnest, const Box3* reach = nullptr, double reach_speed = 0.0) const {
     double steps = 1.0;
+    if (!collidable()) return steps;
     for (int i = 0; i < model_.body_count(); ++i) {
       if (data_.asleep[i]) continue;
       const RigidBodyDef& def = model_.defs[i];
@@ -80,7 +99,7 @@ class BodySpeeds {
         const double radius = def.bounding_radius + (speed + reach_speed) * frame_dt_;
         if ((data_.x[i].cwiseMax(reach->min()).cwiseMin(reach->max()) - data_.x[i]).norm() > radius) continue;
       }
-      const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
+      const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * std::max(thinnest, 0.0));
       steps = std::max(steps, std::ceil(speed * frame_dt_ / limit));
     }
     return steps;
@@ -122,7 +141,20 @@ class BodySpeeds {
   double time_, frame_dt_;
 };
 
-// The bodies' substeps (before the cloths' say), from their ceiling and travel
+}  // namespace
+
+double jointed_turn_rate(const RigidModel& model, const RigidData& data) {
+  double fastest = 0.0;
+  for (int i = 0; i < model.body_count(); ++i) {
+    if (model.defs[i].kinematic || data.asleep[i] || model.body_joints[i].empty()) continue;
+    fastest = std::max(fastest, angular_velocity(model.defs[i], data.q[i], data.l[i]).norm());
+  }
+  return fastest;
+}
+
+namespace {
+
+// The bodies' substeps (before the cloths' say), from their ceiling, travel and joints' turn
 double rigid_steps(const RigidModel& model, const RigidData& data, bool cloths, const WorldSettings& settings,
                    double frame_dt, double travel) {
   const double limit = settings.max_substeps;
@@ -134,7 +166,8 @@ double rigid_steps(const RigidModel& model, const RigidData& data, bool cloths, 
     restitution = restitution || model.defs[i].restitution > 0.0;
   }
   const double ceiling = awake && restitution ? std::min(settings.max_substep, settings.bounce_substep) : settings.max_substep;
-  const double steps = std::max(awake || (dynamic && (moving || cloths)) ? std::ceil(frame_dt / ceiling) : 1.0, travel);
+  const double turn = std::ceil(jointed_turn_rate(model, data) * frame_dt / settings.joint_turn);
+  const double steps = std::max({awake || (dynamic && (moving || cloths)) ? std::ceil(frame_dt / ceiling) : 1.0, travel, turn});
   return std::isfinite(steps) ? std::clamp(steps, 1.0, limit) : limit;
 }
 

@@ -17,6 +17,10 @@ struct FrameSchedule {
   int cloth_steps = 1;  // 1 with no cloth
 };
 
+// The fastest turn of an awake jointed dynamic body (rad/s), 0 with none: the automatic
+// substeps keep its turn per substep within WorldSettings::joint_turn
+double jointed_turn_rate(const RigidModel& model, const RigidData& data);
+
 // The automatic schedule of the frame of length frame_dt (s) that starts at `time` (s)
 FrameSchedule frame_schedule(const RigidModel& model, const RigidData& data, const std::vector<SteppedCloth>& cloths,
                              const WorldSettings& settings, double time, double frame_dt);

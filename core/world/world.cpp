@@ -25,6 +25,11 @@
 
 namespace simbake {
 
+namespace {
+// (m, rad) a joint error a step ends at above this: its Newton solve did not converge
+constexpr double kUnconvergedJoints = 1e-6;
+}  // namespace
+
 World::World(const WorldSettings& settings) : settings_(settings) { check_settings(settings); }
 
 void World::set_ground(const GroundDef& ground) {
@@ -93,10 +98,13 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   // count steps them every substep)
   const FrameSchedule schedule = substeps > 0 ? FrameSchedule{substeps, substeps}
                                              : frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt);
-  const int n = std::min(schedule.substeps, settings_.max_substeps);
-  const double dt = frame_dt / n;
+  int n = std::min(schedule.substeps, settings_.max_substeps);
+  double dt = frame_dt / n;
   const int cloth_steps = std::min(schedule.cloth_steps, n);
   const int group = n % cloth_steps == 0 ? n / cloth_steps : 1;
+  // automatic substeps of a world with joints and no cloth shorten within the frame when a
+  // jointed body turns faster than they allow (schedule.cpp)
+  const bool replan = substeps == 0 && cloths_.empty() && !rigid_model_.joints.empty();
   // (more threads than the machine has would only be refused by TBB, with a warning on
   // stderr: the results are the same bits on any count, so the arena takes what there is)
   tbb::task_arena arena(settings_.threads > 0 ? std::min(settings_.threads, tbb::info::default_concurrency())
@@ -121,6 +129,19 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
       }
       // a NaN is caught at once and reported, never stepped on
       if (!state_finite(rigid_data_, cloths_)) stats_.finite = false;
+      if (replan && k + 1 < n && n < settings_.max_substeps) {
+        // the rest of the frame in more steps: enough for the fastest turn, and twice as
+        // many while the joints' solve did not converge (light links whipping a heavy body)
+        const double turn = jointed_turn_rate(rigid_model_, rigid_data_);
+        const int left = n - k - 1;
+        double rest = std::ceil(left * dt * turn / settings_.joint_turn);
+        if (rigid_scratch_.joints.error > kUnconvergedJoints) rest = std::max(rest, 2.0 * left);
+        if (rest > left) {
+          const int steps = std::min(static_cast<int>(rest), settings_.max_substeps - k - 1);
+          dt *= static_cast<double>(left) / steps;
+          n = k + 1 + steps;
+        }
+      }
     }
   });
   if (stopped) return taken;
@@ -157,11 +178,22 @@ void World::step_bodies(double dt) {
     return;
   }
   scratch.speculative = settings_.speculative_contacts && cloths_.empty();
-  { StageTimer timer(profile_, Stage::kBroadPhase); broad_phase(model, data, scratch, settings_, dt); }
-  { StageTimer timer(profile_, Stage::kCollisions); resolve_collisions(model, data, scratch, settings_, dt, stats_.substeps); }
+  // with no ground and no body something can touch (a chain of shapeless links) nothing
+  // collides: no pair, no contact, and the stages that find them have nothing to do
+  const bool collidable = model.ground || std::any_of(model.defs.begin(), model.defs.end(),
+                                                      [](const RigidBodyDef& def) { return def.shape != nullptr; });
+  if (collidable) {
+    { StageTimer timer(profile_, Stage::kBroadPhase); broad_phase(model, data, scratch, settings_, dt); }
+    { StageTimer timer(profile_, Stage::kCollisions); resolve_collisions(model, data, scratch, settings_, dt, stats_.substeps); }
+  } else {
+    scratch.pairs.clear();
+    scratch.contacts.clear();
+  }
   { StageTimer timer(profile_, Stage::kVelocities); update_velocities(model, data, settings_, dt); }
-  { StageTimer timer(profile_, Stage::kContacts); resolve_contacts(model, data, scratch, settings_, dt); }
-  { StageTimer timer(profile_, Stage::kShockPropagation); propagate_shocks(model, data, scratch, settings_); }
+  if (collidable) {
+    { StageTimer timer(profile_, Stage::kContacts); resolve_contacts(model, data, scratch, settings_, dt); }
+    { StageTimer timer(profile_, Stage::kShockPropagation); propagate_shocks(model, data, scratch, settings_); }
+  }
   { StageTimer timer(profile_, Stage::kJoints); solve_joints(model, data, scratch.joints, dt, time_ + dt); }
   if (!model.joints.empty() && !scratch.contacts.empty()) {
     // the joints coupled bodies the contacts saw apart (a glued pair landing: the upper one's

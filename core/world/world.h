@@ -60,7 +60,9 @@ class World {
   double time() const { return time_; }  // (s) simulated so far
 
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
-  // substeps == 0; returns the number of substeps taken. `stop`, if given, is asked before
+  // substeps == 0 (which, with joints and no cloth, shorten part-way through the frame when
+  // a jointed body turns faster than they allow: schedule.cpp); returns the number of
+  // substeps taken. `stop`, if given, is asked before
   // each substep after the first (it must be cheap: the bindings' looks at the clock and, every
   // 50 ms, at Python's signals); when it says true the frame ends there, part-way, without
   // its statistics, and the world is left at that substep. It changes nothing else

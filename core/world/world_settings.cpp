@@ -45,6 +45,7 @@ void check_settings(const WorldSettings& s) {
   positive(s.bounce_substep, "bounce_substep");
   positive(s.cloth_max_substep, "cloth_max_substep");
   positive(s.travel_fraction, "travel_fraction");
+  positive(s.joint_turn, "joint_turn");
   at_least(s.max_substeps, 1, "max_substeps");
   if (s.threads < 0 || s.threads > kMaxThreads) {
     throw std::invalid_argument("threads must be in [0, " + std::to_string(kMaxThreads) + "] (0 = every CPU), got " +

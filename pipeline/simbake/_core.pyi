@@ -82,6 +82,7 @@ class WorldSettings:
     cloth_contacts_in_solve: bool
     cloth_max_substep: float         # s
     travel_fraction: float
+    joint_turn: float                # rad
     max_substeps: int
     threads: int                     # 0 (every CPU) to MAX_THREADS
     def __init__(self, **fields: Any) -> None: ...
