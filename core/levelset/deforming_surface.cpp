@@ -48,6 +48,17 @@ double DeformingSurface::reach(const Vec3& center) const {
   return r;
 }
 
+double DeformingSurface::fastest_in(const Box3& box) const {
+  double fastest = 0.0;
+  for (Eigen::Index k = 0; k < end_.rows(); ++k) {
+    const Vec3 a = start_.row(k).transpose(), b = end_.row(k).transpose();
+    if (box.intersects(Box3(a.cwiseMin(b), a.cwiseMax(b)))) {
+      fastest = std::max(fastest, velocity_.row(k).norm());
+    }
+  }
+  return fastest;
+}
+
 // Cells of about the mean distance between neighbouring vertices: the bounding box's volume
 // shared among the vertices
 void DeformingSurface::bin() {

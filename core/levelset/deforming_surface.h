@@ -42,6 +42,9 @@ class DeformingSurface {
   SignedDistancePtr shape_at(double s) const;
   // the farthest any vertex is from `center` over the frame (m)
   double reach(const Vec3& center) const;
+  // the fastest of the vertices whose line over the frame may meet `box` (its bounding box
+  // does) (m/s), 0 if none
+  double fastest_in(const Box3& box) const;
   // the affine field v = A x + c nearest (least squares over the vertices, at blend s) to the
   // vertices' velocities: the motion of the cloth's impact zones that hold the surface's
   // vertices (cloth/self_collision.h, ObstacleMotion); exact for a surface that swells, turns

@@ -94,11 +94,11 @@ void World::set_kinematic_track(int i, KinematicTrack track) {
 }
 
 int World::automatic_substeps(double frame_dt) const {
-  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt).substeps;
+  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt, rigid_scratch_.surfaces).substeps;
 }
 
 int World::automatic_cloth_steps(double frame_dt) const {
-  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt).cloth_steps;
+  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt, rigid_scratch_.surfaces).cloth_steps;
 }
 
 int World::step_frame(double frame_dt, int substeps, const std::function<bool()>& stop) {
@@ -106,7 +106,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   // the cloths step once every `group` substeps, over the group's time (a fixed substep
   // count steps them every substep)
   const FrameSchedule schedule = substeps > 0 ? FrameSchedule{substeps, substeps}
-                                             : frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt);
+                                             : frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt, rigid_scratch_.surfaces);
   const int n = std::min(schedule.substeps, settings_.max_substeps);
   const double dt = frame_dt / n;
   const int cloth_steps = std::min(schedule.cloth_steps, n);
