@@ -67,16 +67,9 @@ TEST(ClothAttachment, RidesADeformingSurface) {
     vertices = r * unit.vertices * R.transpose();
     return std::make_pair(r, R);
   };
-  BodyDesc sphere;
   Points start;
   at(0, start);
-  sphere.shape = std::make_shared<SphereDistance>(0.3);
-  sphere.samples = start;
-  sphere.mesh_vertices = start;
-  sphere.mesh_triangles = unit.triangles;
-  sphere.unit_mass = sphere_mass_properties(0.3);
-  sphere.kinematic = true;
-  const int b = world.add_body(sphere);
+  const int b = world.add_body(test::deforming_sphere_body(start, unit.triangles, 0.3));
   world.set_deforming_frame(b, start, std::make_shared<SphereDistance>(0.3), 1.0 / 24.0);
   // five vertices of the upper half, far apart; the collar: them pushed out 10 mm, then two
   // rows flaring out and down from them

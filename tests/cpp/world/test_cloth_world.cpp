@@ -223,14 +223,7 @@ TEST(ClothWorld, ADeformingColliderNearTheClothMovesAtMostItsThicknessAStep) {
     for (const double moves : {0.1, 0.0}) {
       World world;
       const Points start = (0.3 * unit.vertices).rowwise() + Vec3(0.0, away, 0.0).transpose();
-      BodyDesc sphere;
-      sphere.shape = std::make_shared<SphereDistance>(0.3);
-      sphere.samples = start;
-      sphere.mesh_vertices = start;
-      sphere.mesh_triangles = unit.triangles;
-      sphere.unit_mass = sphere_mass_properties(0.3);
-      sphere.kinematic = true;
-      const int b = world.add_body(sphere);
+      const int b = world.add_body(test::deforming_sphere_body(start, unit.triangles, 0.3));
       world.set_deforming_frame(b, start, std::make_shared<SphereDistance>(0.3), frame);
       world.add_cloth(test::with_contacts(square_cloth(1.0, 9, Vec3(0.0, 0.303, 0.0)), 0.4, thickness));
       const Points end = start.rowwise() + Vec3(moves, 0.0, 0.0).transpose();
