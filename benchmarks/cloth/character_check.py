@@ -16,10 +16,11 @@ At every baked frame of the `--shot` stage (the cache over the shot):
   triangles crossing (a cloth through itself or through another);
 - strain: the largest |l| / L - 1 over edges, L from the shot's rest shape, within the
   cloth's strain limit + 1% of it;
-- attached: each attached point against where its binding carries it: on a deforming target,
-  bound at the first frame to the nearest point of the target's surface (triangle and
-  barycentric coordinates), its offset from there kept in that triangle's frame; on a rigid
-  target, fixed in the body's frame: within 1 mm;
+- attached: each attached point against where its binding carries it (the binding of
+  simbake.qa_attachments, on the surfaces posed here): on a deforming target, bound at the
+  first frame to the nearest point of the target's surface (triangle and barycentric
+  coordinates), its offset from there kept in that triangle's frame; on a rigid target, fixed
+  in the body's frame: within 1 mm;
 - through: a deforming collider's edges through cloth triangles (render_ready's predicate):
   none.
 
@@ -38,6 +39,7 @@ import numpy as np
 
 from benchmarks.cloth.crossings import crossing_count
 from benchmarks.cloth.render_ready import edge_samples, largest_strain, mesh_edges, segments_through_mesh
+from simbake.qa_attachments import bind_to_mesh, carried_on_mesh
 
 DEEPEST_INSIDE = 1e-3    # (m) a cloth point past a deforming collider's surface
 ATTACH_SLACK = 1e-3      # (m) an attached point from where its binding carries it
@@ -99,72 +101,15 @@ class PosedSurface:
         return _apply(world, np.asarray(points, dtype=np.float64))
 
 
-def closest_on_triangles(p: np.ndarray, corners: np.ndarray, chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
-    """For each point p (n, 3), the nearest of the triangles corners (m, 3, 3): its index and
-    the barycentric coordinates (n, 3) of the nearest point on it (Ericson, Real-Time
-    Collision Detection 5.1.5: the Voronoi regions of the corners, edges and face)."""
-    tri = np.empty(len(p), dtype=np.int64)
-    bary = np.empty((len(p), 3))
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    ab, ac = b - a, c - a
-    for s in range(0, len(p), chunk):
-        q = p[s:s + chunk, None, :]                                   # (k, 1, 3)
-        ap, bp, cp = q - a, q - b, q - c
-        d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
-        d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
-        d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
-        va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-        denom = va + vb + vc
-        v = vb / np.where(denom != 0, denom, 1.0)
-        w = vc / np.where(denom != 0, denom, 1.0)
-        u = 1.0 - v - w
-        # the regions outside the face, in the order Ericson tests them (later ones win)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cases = [
-                ((d1 <= 0) & (d2 <= 0), (1.0, 0.0, 0.0)),
-                ((d3 >= 0) & (d4 <= d3), (0.0, 1.0, 0.0)),
-                ((d6 >= 0) & (d5 <= d6), (0.0, 0.0, 1.0)),
-            ]
-            t_ab = d1 / (d1 - d3)
-            t_ac = d2 / (d2 - d6)
-            t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        edges = [((vc <= 0) & (d1 >= 0) & (d3 <= 0), (1 - t_ab, t_ab, 0 * t_ab)),
-                 ((vb <= 0) & (d2 >= 0) & (d6 <= 0), (1 - t_ac, 0 * t_ac, t_ac)),
-                 ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), (0 * t_bc, 1 - t_bc, t_bc))]
-        bu, bv, bw = u, v, w
-        for mask, (x, y, z) in edges:
-            bu, bv, bw = np.where(mask, x, bu), np.where(mask, y, bv), np.where(mask, z, bw)
-        for mask, (x, y, z) in cases:
-            bu, bv, bw = np.where(mask, x, bu), np.where(mask, y, bv), np.where(mask, z, bw)
-        nearest = bu[..., None] * a + bv[..., None] * b + bw[..., None] * c
-        d = np.linalg.norm(q - nearest, axis=-1)                      # (k, m)
-        k = np.argmin(d, axis=1)
-        rows = np.arange(len(k))
-        tri[s:s + chunk] = k
-        bary[s:s + chunk] = np.stack([bu[rows, k], bv[rows, k], bw[rows, k]], axis=1)
-    return tri, bary
-
-
-def _triangle_frames(corners: np.ndarray) -> np.ndarray:
-    """An orthonormal frame per triangle (m, 3, 3), columns: the first edge, across it, the
-    normal."""
-    e1 = corners[:, 1] - corners[:, 0]
-    n = np.cross(e1, corners[:, 2] - corners[:, 0])
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    return np.stack([e1, np.cross(n, e1), n], axis=2)
-
-
 @dataclass
 class Attachment:
-    """One cloth's attached points and how the check carries them."""
+    """One cloth's attached points and how the check carries them (the binding of
+    simbake.qa_attachments, on the surfaces posed here)."""
 
     points: np.ndarray                   # (k,) cloth point indices
     target: str                          # the target prim's path
     surface: PosedSurface | None = None  # a deforming target
-    triangle: np.ndarray | None = None   # (k,) bound triangle of each point
-    bary: np.ndarray | None = None       # (k, 3) its barycentric coordinates
-    offset: np.ndarray | None = None     # (k, 3) the point's offset in that triangle's frame
+    bound: tuple | None = None           # its (triangle, barycentric weights, offset) per point
     local: np.ndarray | None = None      # (k, 3) a rigid target: the points in its frame
 
     def bind(self, stage, frame: int, cloth_points: np.ndarray) -> None:
@@ -172,11 +117,7 @@ class Attachment:
 
         p = cloth_points[self.points]
         if self.surface is not None:
-            corners = self.surface.points(frame)[self.surface.triangles]
-            self.triangle, self.bary = closest_on_triangles(p, corners)
-            bound = np.einsum("ki,kij->kj", self.bary, corners[self.triangle])
-            frames = _triangle_frames(corners[self.triangle])
-            self.offset = np.einsum("kji,kj->ki", frames, p - bound)
+            self.bound = bind_to_mesh(p, self.surface.points(frame), self.surface.triangles)
         else:
             world = UsdGeom.Xformable(stage.GetPrimAtPath(self.target)).ComputeLocalToWorldTransform(frame)
             self.local = _apply(np.linalg.inv(np.array(world)), p)
@@ -186,9 +127,7 @@ class Attachment:
         from pxr import UsdGeom
 
         if self.surface is not None:
-            corners = self.surface.points(frame)[self.surface.triangles][self.triangle]
-            bound = np.einsum("ki,kij->kj", self.bary, corners)
-            return bound + np.einsum("kij,kj->ki", _triangle_frames(corners), self.offset)
+            return carried_on_mesh(self.surface.points(frame), self.surface.triangles, *self.bound)
         world = UsdGeom.Xformable(stage.GetPrimAtPath(self.target)).ComputeLocalToWorldTransform(frame)
         return _apply(world, self.local)
 
