@@ -101,9 +101,11 @@ class ClothStep {
     }
     {
       StageTimer timer(profile_, Stage::kClothForces);
-      measured([&] { cloth_.update_velocities(dt_, settings_.gravity, &constraints); });
+      reaction_.measured(cloth_, [&] { cloth_.update_velocities(dt_, settings_.gravity, &constraints); });
       // (the surfaces' impulses on the contacts held in the solve are theirs, not the attachment's)
-      for (const ClothContactConstraint& c : constraints) not_given(c.vertex, c.impulse * c.normal + c.friction);
+      for (const ClothContactConstraint& c : constraints) {
+        if (reaction_.on()) reaction_.not_given(cloth_, c.vertex, c.impulse * c.normal + c.friction);
+      }
     }
     {
       StageTimer timer(profile_, Stage::kClothContacts);
@@ -119,7 +121,7 @@ class ClothStep {
   // (a global pass that leaves the cloth past kGiveStrain x its limit: sweeps alone from then on)
   void limit_strain(bool global) {
     StageTimer timer(profile_, Stage::kClothStrain);
-    measured([&] { cloth_.limit_strain(dt_, global && !sweeps_only_); });
+    reaction_.measured(cloth_, [&] { cloth_.limit_strain(dt_, global && !sweeps_only_); });
     if (global && !sweeps_only_ && past_give(cloth_.candidate_strain(dt_))) sweeps_only_ = true;
   }
 
@@ -224,63 +226,36 @@ class ClothStep {
     cloth_.update_positions(dt_);
     if (!attachment_) return;
     attachment_->place(cloth_);
-    if (!reacting_) return;
+    if (!reaction_.on()) return;
     const int b = attachment_->body();
     StageTimer timer(profile_, Stage::kClothContacts);
-    bodies_.apply_wrench(b, -given_.linear, -given_.angular);
+    bodies_.apply_wrench(b, -reaction_.given().linear, -reaction_.given().angular);
     if (bodies_.asleep(b)) bodies_.wake(b);
   }
 
  private:
   // The attached vertices' velocities over the step, and their motion for the impact zones;
-  // with a dynamic body, the reaction's bookkeeping starts: the weight of what hangs from the
-  // attachment (its free and attached vertices) is gravity's, not the attachment's
+  // with a dynamic body, the reaction's bookkeeping (contact/cloth_attachment.h) starts, and
+  // counts the velocities given
   void attach() {
-    reacting_ = attachment_->reacting(bodies_);
-    if (reacting_) {
-      center_ = bodies_.body(attachment_->body()).center;
-      const ClothModel& m = cloth_.model();
-      for (int k = 0; k < cloth_.vertex_count(); ++k) {
-        if (!m.pinned[k] || m.attached[k]) not_given(k, dt_ * m.mass[k] * settings_.gravity);
-        pinned_ = pinned_ || (m.pinned[k] && !m.attached[k]);
-      }
+    if (attachment_->reacting(bodies_)) {
+      reaction_.begin(cloth_, bodies_.body(attachment_->body()).center, settings_.gravity, dt_);
     }
-    measured([&] { attachment_->prescribe(cloth_, bodies_, dt_); });
+    reaction_.measured(cloth_, [&] { attachment_->prescribe(cloth_, bodies_, dt_); });
     self_settings_.attached = &cloth_.model().attached;
     self_settings_.attachment_motion = &attachment_->motion();
   }
 
-  // f() run, and with a dynamic body the cloth's change of momentum over it counted as the
-  // attachment's (what f does to the free vertices is internal but for the attached ones'
-  // share, which is the attachment's: contact/cloth_attachment.cpp)
-  template <class F>
-  void measured(F&& f) {
-    if (!reacting_) return f();
-    const ClothMomentum before = cloth_momentum(cloth_, center_);
-    f();
-    add_given(before);
-  }
-  // the cloth's change of momentum since `before`, the attachment's
-  void add_given(const ClothMomentum& before) {
-    const ClothMomentum after = cloth_momentum(cloth_, center_);
-    given_.linear += after.linear - before.linear;
-    given_.angular += after.angular - before.angular;
-  }
   // whether self-collision's change of the cloth's momentum is counted as the attachment's
-  // (on_self): with a dynamic body, no obstacle, no pin, and no still surface (the ground, a
-  // static body) holding a vertex this step
+  // (on_self): with a dynamic body, and no obstacle, pin or still surface (the ground, a
+  // static body holding a vertex this step) that could have absorbed some of it too
   bool self_counted() const {
-    if (!reacting_ || joined_ || pinned_) return false;
-    for (const Vec3& n : contact_.support()) {
-      if (n.squaredNorm() > 0.0) return false;
+    if (!reaction_.on() || joined_) return false;
+    const ClothModel& m = cloth_.model();
+    for (int k = 0; k < cloth_.vertex_count(); ++k) {
+      if ((m.pinned[k] && !m.attached[k]) || contact_.support()[k].squaredNorm() > 0.0) return false;
     }
     return true;
-  }
-  // an impulse J (N s) on vertex k during a measured stage that was not the attachment's
-  void not_given(int k, const Vec3& J) {
-    if (!reacting_) return;
-    given_.linear -= J;
-    given_.angular -= (Vec3(cloth_.positions().row(k).transpose()) - center_).cross(J);
   }
 
   bool over_limit() const { return limit_ > 0.0 && cloth_.candidate_strain(dt_) > limit_ * (1.0 + kFinalSlack); }
@@ -294,11 +269,13 @@ class ClothStep {
     {
       StageTimer timer(profile_, Stage::kClothStrain);
       const std::vector<char>& zones = self_->zone_vertices();
-      measured([&] { pushed = cloth_.limit_strain_holding(dt_, joined_ ? obstacles_.cloth_part(zones) : zones); });
+      reaction_.measured(cloth_, [&] {
+        pushed = cloth_.limit_strain_holding(dt_, joined_ ? obstacles_.cloth_part(zones) : zones);
+      });
       // (what the held zones absorbed, self-collision gives back to them below: not the
       // attachment's, so taken out here unless that is counted too)
-      if (reacting_ && !self_counted()) {
-        for (int k = 0; k < cloth_.vertex_count(); ++k) not_given(k, -Vec3(pushed.row(k).transpose()));
+      if (reaction_.on() && !self_counted()) {
+        for (int k = 0; k < cloth_.vertex_count(); ++k) reaction_.not_given(cloth_, k, -Vec3(pushed.row(k).transpose()));
       }
     }
     on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
@@ -317,9 +294,9 @@ class ClothStep {
     if (!joined_) {
       const bool counted = self_counted();
       const long long stills = stats_.stills;
-      const ClothMomentum before = counted ? cloth_momentum(cloth_, center_) : ClothMomentum();
+      const ClothMomentum before = counted ? cloth_momentum(cloth_, reaction_.center()) : ClothMomentum();
       const bool result = f(cloth_.positions(), cloth_.velocities(), contact_.inverse_mass(), self_settings_);
-      if (counted && stats_.stills == stills) add_given(before);
+      if (counted && stats_.stills == stills) reaction_.add_since(cloth_, before);
       return result;
     }
     obstacles_.load(cloth_.velocities(), contact_.support());
@@ -344,10 +321,7 @@ class ClothStep {
   SelfCollisionSettings self_settings_;
   bool joined_ = false;                  // the obstacles joined self-collision this step
   bool sweeps_only_ = false;             // the cloth gave: strain limited by sweeps alone
-  bool reacting_ = false;                // attached to a dynamic body, which takes the reaction
-  bool pinned_ = false;                  // (then) some of its vertices are pinned too
-  Vec3 center_ = Vec3::Zero();           // its centre of mass (m): the angular momenta's point
-  ClothMomentum given_;                  // what the attachment gave the cloth so far this step
+  AttachmentReaction reaction_;          // attached to a dynamic body: what the attachment gives
 };
 
 }  // namespace

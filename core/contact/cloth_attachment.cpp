@@ -32,11 +32,16 @@
 // it hangs, at the next body step (as the cloth's contacts' impulses reach bodies). Total
 // momentum of the body and the cloth then changes by gravity and the contacts only. Not
 // counted: self-collision's impulses on attached vertices (a fold of the cloth pushed against
-// its own attached row), which the attached vertices absorb as a pin would.
+// its own attached row) in a step where a pin, an obstacle or a still surface takes part in
+// self-collision too (cloth_step.cpp). The reaction comes a step late, so the body must
+// outweigh the cloth (check_carrier).
 #include "contact/cloth_attachment.h"
 
 #include "geometry/closest_points.h"
 
+#include <Eigen/Eigenvalues>
+
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -56,6 +61,33 @@ bool triangle_frame(const Vec3& a, const Vec3& b, const Vec3& c, Mat3& frame) {
   frame.col(1) = n.cross(e1);
   frame.col(2) = n;
   return true;
+}
+
+// A dynamic body takes the attachment's reaction a step late (as it takes the contacts'), so
+// a body whose velocity the cloth could change more than its own inertia resists oscillates
+// with a growing amplitude (an error e in its velocity comes back as -(m_cloth / M) e the next
+// step). It must outweigh the cloth: its mass the cloth's at least, and its smallest moment of
+// inertia the cloth's largest about the body's centre of mass (the cloth as a rigid body: an
+// upper bound of what a flexible one drags along). Measured: a 0.06 kg sheet hanging from a
+// box is carried by a box of 0.06 kg, and blows up under one of 0.045 kg.
+void check_carrier(const Cloth& cloth, const ContactBody& body) {
+  const Eigen::VectorXd& m = cloth.masses();
+  Mat3 inertia = Mat3::Zero();
+  for (int k = 0; k < cloth.vertex_count(); ++k) {
+    const Vec3 r = row(cloth.positions(), k) - body.center;
+    inertia += m[k] * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+  }
+  const double mass = m.sum(), moment = Eigen::SelfAdjointEigenSolver<Mat3>(inertia).eigenvalues().maxCoeff();
+  const double body_mass = 1.0 / body.inverse_mass, body_moment = 1.0 / body.inverse_inertia.maxCoeff();
+  if (body_mass < mass || body_moment < moment) {
+    char text[320];
+    std::snprintf(text, sizeof text,
+                  "a dynamic body carrying a cloth must outweigh it: the body has %.4g kg and a smallest moment of "
+                  "inertia of %.4g kg m^2, the cloth %.4g kg and %.4g kg m^2 about the body's centre; make the body "
+                  "heavier, or kinematic",
+                  body_mass, body_moment, mass, moment);
+    throw std::invalid_argument(text);
+  }
 }
 
 }  // namespace
@@ -81,6 +113,7 @@ ClothAttachment::ClothAttachment(const Cloth& cloth, const std::vector<int>& ver
   }
   if (vertices.empty()) throw std::invalid_argument("attachment: no vertex to attach");
   const ContactBody& b = bodies.body(body);
+  if (!b.kinematic) check_carrier(cloth, b);
   const Points& x = cloth.positions();
   const int n = static_cast<int>(vertices.size());
   triangle_.assign(n, -1);
@@ -146,6 +179,27 @@ void ClothAttachment::prescribe(Cloth& cloth, const ContactBodies& bodies, doubl
     motion_.A = (turn - Mat3::Identity()) / dt;
     motion_.c = (b.pose.translation - turn * b.start_pose.translation) / dt;
   }
+}
+
+void AttachmentReaction::begin(const Cloth& cloth, const Vec3& center, const Vec3& gravity, double dt) {
+  on_ = true;
+  center_ = center;
+  given_ = ClothMomentum();
+  const ClothModel& m = cloth.model();
+  for (int k = 0; k < cloth.vertex_count(); ++k) {
+    if (!m.pinned[k] || m.attached[k]) not_given(cloth, k, dt * m.mass[k] * gravity);
+  }
+}
+
+void AttachmentReaction::add_since(const Cloth& cloth, const ClothMomentum& before) {
+  const ClothMomentum after = cloth_momentum(cloth, center_);
+  given_.linear += after.linear - before.linear;
+  given_.angular += after.angular - before.angular;
+}
+
+void AttachmentReaction::not_given(const Cloth& cloth, int k, const Vec3& J) {
+  given_.linear -= J;
+  given_.angular -= (row(cloth.positions(), k) - center_).cross(J);
 }
 
 void ClothAttachment::place(Cloth& cloth) const {

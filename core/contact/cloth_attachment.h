@@ -27,6 +27,38 @@ struct ClothMomentum {
 // Σ m v and Σ m (x - center) x v over the cloth's vertices now
 ClothMomentum cloth_momentum(const Cloth& cloth, const Vec3& center);
 
+// What a cloth's attachment gives it over one step, for a dynamic body to take back
+// (cloth_attachment.cpp, "Reaction"): the change of the cloth's momentum, and of its angular
+// momentum about the body's centre of mass, over the stages the attachment acts in, less what
+// else acts in them. Off (measuring nothing) until begun
+class AttachmentReaction {
+ public:
+  // A step begins: about `center` (m), the weight over dt (s) of what hangs from the
+  // attachment (the cloth's free and attached vertices; a pinned one's is its pin's) not the
+  // attachment's
+  void begin(const Cloth& cloth, const Vec3& center, const Vec3& gravity, double dt);
+  bool on() const { return on_; }
+  // f() run, the cloth's change of momentum over it the attachment's
+  template <class F>
+  void measured(const Cloth& cloth, F&& f) {
+    if (!on_) return f();
+    const ClothMomentum before = cloth_momentum(cloth, center_);
+    f();
+    add_since(cloth, before);
+  }
+  // the cloth's change of momentum since `before`, the attachment's
+  void add_since(const Cloth& cloth, const ClothMomentum& before);
+  // an impulse J (N s) on vertex k in a measured stage that was not the attachment's
+  void not_given(const Cloth& cloth, int k, const Vec3& J);
+  const ClothMomentum& given() const { return given_; }  // so far this step
+  const Vec3& center() const { return center_; }
+
+ private:
+  bool on_ = false;
+  Vec3 center_ = Vec3::Zero();
+  ClothMomentum given_;
+};
+
 class ClothAttachment {
  public:
   // The cloth vertices `vertices` (the cloth's ClothDesc::attached) bound where they are now

@@ -39,7 +39,7 @@ def load_scene(path: str | os.PathLike[str], *, start_frame: int | None = None,
         if frames is not None and None in frames:  # one end given: the other is the stage's
             frames = stage_range(load_shot(path, None), frames)
         return load_shot(path, frames)
-    return with_frames(load_toml_scene(file), start_frame, end_frame)
+    return with_frames(load_toml_scene(file, frames), start_frame, end_frame)
 
 
 def with_frames(scene: Scene, start_frame: int | None = None, end_frame: int | None = None) -> Scene:

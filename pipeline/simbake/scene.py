@@ -346,11 +346,12 @@ TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KE
               "joints": _JOINT_KEYS}
 
 
-def load_toml_scene(path: str | os.PathLike[str]) -> Scene:
+def load_toml_scene(path: str | os.PathLike[str], frames: tuple | None = None) -> Scene:
     """Read and validate a TOML scene file; raise :class:`SceneError` on any problem.
+    `frames` (start, end; either may be None): another range than the file's (``--frames``).
     (simbake.load_scene takes a USD shot too: simbake.loading.)"""
     file = os.fspath(path)  # named in messages exactly as the user gave it
-    return scene_from_data(read_scene_data(file), file)
+    return scene_from_data(read_scene_data(file), file, frames)
 
 
 def frame_range(file: str, start_frame, end_frame) -> tuple | None:
@@ -387,9 +388,10 @@ def read_scene_data(path: str | os.PathLike[str]) -> dict[str, Any]:
     return _read_toml(file, _scene_path(file))
 
 
-def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene:
+def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str], frames: tuple | None = None) -> Scene:
     """Validate parsed TOML tables as the scene file at `path` would be (paths relative to it,
-    messages naming it): what load_toml_scene does after reading. A wedge edits the tables of a
+    messages naming it): what load_toml_scene does after reading, over the range `frames` when
+    given (a deforming body's files are those of the range). A wedge edits the tables of a
     scene file and validates each take's through here (simbake.wedge_takes)."""
     file = os.fspath(path)
     scene_path = _scene_path(file)
@@ -426,6 +428,10 @@ def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene
         filtered_pairs=_filtered_pairs(root, names),
     )
     check_scene(scene)  # the physical range and the budget of what the scene alone decides
+    if frames is not None and (frames[0], frames[1]) != (None, None):
+        start, end = stage_range(scene, frames)
+        scene = replace(scene, start_frame=start, end_frame=end)
+        check_scene(scene)
     return read_sequences(scene)
 
 

@@ -108,7 +108,10 @@ def _attach_cloths(world, scene: Scene) -> None:
     index = {b.name: i for i, b in enumerate(scene.bodies)}
     for k, cloth in enumerate(scene.cloths):
         if cloth.attached:
-            world.attach_cloth(k, index[cloth.attach_to])
+            try:
+                world.attach_cloth(k, index[cloth.attach_to])
+            except ValueError as error:
+                raise SceneError(scene.source, scene.source_key(f"cloths[{k}].attach.to"), str(error)) from None
 
 
 def set_deforming_frames(scene: Scene, world, assets: list[BodyAsset], frame: int) -> None:

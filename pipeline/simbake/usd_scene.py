@@ -800,6 +800,8 @@ class _Reader:
         key = f"cloths[{index}]"
         self.keys += [(key, str(path)), (f"{key}.position", f"{path}.points")]
         self.keys += [(f"{key}.{name}", f"{path}.simbake:cloth:{_camel(name)}") for name in _CLOTH_KEYS]
+        self.keys += [(f"{key}.attach.to", f"{path}.simbake:cloth:attachTo"),
+                      (f"{key}.attach.points", f"{path}.simbake:cloth:attached")]
 
     def _rigid_body(self, path: str, d, shapes, used: set[str], index: int):
         from pxr import Usd, UsdGeom, UsdPhysics

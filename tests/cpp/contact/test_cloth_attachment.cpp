@@ -161,8 +161,18 @@ TEST(ClothAttachment, ADynamicBodyTakesTheReaction) {
 }
 
 // Bad attachments are refused: a vertex both pinned and attached, one listed twice, one out
-// of range; a cloth with attached vertices steps only once attached
+// of range; a cloth with attached vertices steps only once attached; a dynamic body lighter
+// than the cloth it would carry (the reaction, a step late, would blow up)
 TEST(ClothAttachment, BadAttachmentsAreRefused) {
+  {
+    World world;
+    const int b = world.add_body(box_body(Vec3(0.4, 0.4, 0.4), 0.05, Vec3(0.0, 1.0, 0.0)));
+    ClothDesc heavy = grid_cloth(7, 9, 0.4, 0.6, Vec3(-0.2, 0.5, -0.2));
+    heavy.area_density = 0.25;  // 0.06 kg
+    heavy.attached = {0, 1, 2};
+    const int c = world.add_cloth(heavy);
+    EXPECT_THROW(world.attach_cloth(c, b), std::invalid_argument);
+  }
   ClothDesc sheet = grid_cloth(3, 3, 1.0, 1.0);
   sheet.pinned = {0};
   sheet.attached = {0};

@@ -55,7 +55,7 @@ SLAB = dict(size=(1.2, 0.2, 1.2), top=0.1, ball_radius=0.1)
 CAPE = dict(arc=50.0, columns=17, rows=13, length=0.6, dr=0.02, area_density=0.2, stretch_stiffness=500.0,
             bend_stiffness=2e-4, thickness=0.005)
 RISE = 0.1                                  # (m/s) the slab's top rises this fast
-BEND = (7, 37)                        # the elbow bends between these frames, 0 to 90 degrees
+BEND = (5, 45)                        # the elbow bends between these frames, 0 to 90 degrees
 ARM_Y = 1.0                           # (m) the arm's axis height
 ARM = dict(start=-0.1, end=0.65, radius=0.05, elbow=0.3, blend=0.05, rings=31, segments=16)
 SLEEVE = dict(length=0.55, radius=0.075, taper=0.08, rings=23, segments=16, area_density=0.15,
@@ -300,10 +300,10 @@ def _hinge() -> np.ndarray:
     return np.array([ARM["elbow"], ARM_Y, -ARM["radius"]])
 
 
-def arm_at(frame: float) -> np.ndarray:
-    """The arm's points at a frame, skinned by linear blending: (1 - w) p + w (R (p - e) + e),
-    R the elbow's turn about +y and e its hinge."""
-    points, _ = arm_mesh()
+def arm_at(frame: float, points: np.ndarray | None = None) -> np.ndarray:
+    """The arm's points (or `points`, weighted as the arm's are) at a frame, skinned by linear
+    blending: (1 - w) p + w (R (p - e) + e), R the elbow's turn about +y and e its hinge."""
+    points = arm_mesh()[0] if points is None else points
     a = elbow_angle(frame)
     turn = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
     e = _hinge()
