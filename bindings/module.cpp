@@ -368,7 +368,9 @@ void bind_cloth_desc(py::module_& m) {
                        [field = field](ClothDesc& d, double value) { d.material.*field = value; });
   }
   enum_field(cloth, "compression", [](ClothDesc& d) -> CompressionMode& { return d.material.compression; }, kCompressions);
-  cloth.def_readwrite("pinned", &ClothDesc::pinned, "vertices held fixed");
+  cloth.def_readwrite("pinned", &ClothDesc::pinned, "vertices held fixed")
+      .def_readwrite("attached", &ClothDesc::attached,
+                     "vertices attached to a body's surface (World.attach_cloth), carried with it");
   enum_field(cloth, "integrator", [](ClothDesc& d) -> ClothIntegrator& { return d.integrator; }, kIntegrators);
   cloth.def_readwrite("tolerance", &ClothDesc::tolerance, "implicit: the linear solve's relative residual");
   enum_field(cloth, "preconditioner", [](ClothDesc& d) -> ClothPreconditioner& { return d.preconditioner; },
@@ -569,6 +571,11 @@ void bind_world_building(py::class_<World>& world) {
       .def("add_cloth", [](World& w, const std::optional<ClothDesc>& given, const py::kwargs& kwargs) {
              return w.add_cloth(given_or_from_keywords(given, kwargs, "desc"));
            }, py::arg("desc") = py::none(), "add_cloth(ClothDesc) or add_cloth(**ClothDesc fields): the cloth's index")
+      .def("attach_cloth", [](World& w, long long cloth, long long body) {
+             w.attach_cloth(checked_index(cloth, w.cloth_count(), "cloth"), checked_index(body, w.body_count(), "body"));
+           }, py::arg("cloth"), py::arg("body"),
+           "Cloth i's attached vertices bound where they are now to body b's nearest surface point and carried with "
+           "it (a deforming body's surface set first); a dynamic body takes the reaction")
       .def("set_deforming_frame", [](World& w, long long index, const Points& vertices, const LevelSet& level_set,
                                       double frame_dt) {
              w.set_deforming_frame(checked_index(index, w.body_count(), "body"), vertices, level_set.distance,

@@ -57,6 +57,27 @@ def _grid(size: float, n: int):
     return points, tris
 
 
+def new_stage(path: Path, generator: str, start: int, end: int, fps: float = FPS, up: str = "Y", mpu: float = 1.0):
+    """A shot's stage at `path`: its axis, units, frames and rate; `/World` (the default prim)
+    and a PhysicsScene (gravity: 9.81 m/s^2 down the up axis). `generator`: the script in
+    assets/scenes that writes it."""
+    from pxr import Usd, UsdGeom, UsdPhysics
+
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetMetadata("comment", f"Written by assets/scenes/{generator}; edit that and run it again.")
+    UsdGeom.SetStageUpAxis(stage, up)
+    UsdGeom.SetStageMetersPerUnit(stage, mpu)
+    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+    stage.SetStartTimeCode(start)
+    stage.SetEndTimeCode(end)
+    stage.SetTimeCodesPerSecond(fps)
+    stage.SetFramesPerSecond(fps)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")
+    return stage
+
+
 def write_shot(path: Path, units: str = "m", up: str = "Y", *, capsule: bool = True,
                cloth: bool = True, end: int = END) -> Path:
     """Author the shot at `path` in metres ("m") or centimetres ("cm"), Y or Z up."""
@@ -88,18 +109,7 @@ def write_shot(path: Path, units: str = "m", up: str = "Y", *, capsule: bool = T
             s = np.abs(C.T @ np.asarray(scale, dtype=np.float64))
             xf.AddScaleOp().Set(Gf.Vec3f(*s))
 
-    stage = Usd.Stage.CreateNew(str(path))
-    stage.SetMetadata("comment", "Written by assets/scenes/generate_shots.py; edit that and run it again.")
-    UsdGeom.SetStageUpAxis(stage, up)
-    UsdGeom.SetStageMetersPerUnit(stage, mpu)
-    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
-    stage.SetStartTimeCode(START)
-    stage.SetEndTimeCode(end)
-    stage.SetTimeCodesPerSecond(FPS)
-    stage.SetFramesPerSecond(FPS)
-    world = UsdGeom.Xform.Define(stage, "/World")
-    stage.SetDefaultPrim(world.GetPrim())
-    UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")  # gravity: 9.81 m/s^2 down the up axis
+    stage = new_stage(path, "generate_shots.py", START, end, up=up, mpu=mpu)
 
     rubber = UsdShade.Material.Define(stage, "/World/Looks/Rubber")
     rubber_api = UsdPhysics.MaterialAPI.Apply(rubber.GetPrim())

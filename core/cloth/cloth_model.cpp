@@ -134,6 +134,14 @@ ClothModel::ClothModel(const ClothDesc& desc)
                                  std::to_string(n) + ")");
     pinned[p] = 1;
   }
+  attached.assign(n, 0);
+  for (int p : desc.attached) {
+    require(p >= 0 && p < n, "attached vertex " + std::to_string(p) + " does not exist (the cloth has " +
+                                 std::to_string(n) + ")");
+    require(!pinned[p] || attached[p], "vertex " + std::to_string(p) + " is both pinned and attached");
+    require(!attached[p], "attached vertex " + std::to_string(p) + " is listed twice");
+    pinned[p] = attached[p] = 1;
+  }
   free_index.assign(n, -1);
   inverse_mass = Eigen::VectorXd::Zero(n);
   for (int v = 0; v < n; ++v) {

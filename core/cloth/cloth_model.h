@@ -43,6 +43,10 @@ struct ClothDesc {
   double area_density = 0.1;          // (kg/m^2), lumped to vertices (a third of each triangle)
   ClothMaterial material;
   std::vector<int> pinned;            // vertices held fixed
+  // vertices attached to something that moves them (a body's surface: contact/cloth_attachment.h):
+  // like pinned ones they are outside the cloth's solve, of infinite mass, but their velocity
+  // is what the caller sets before each step, and they move with it
+  std::vector<int> attached;
   ClothIntegrator integrator = ClothIntegrator::kImplicit;
   double tolerance = 1e-3;            // implicit: the linear solve's relative residual (mass norm)
   ClothPreconditioner preconditioner = ClothPreconditioner::kAutomatic;  // implicit: of its conjugate gradients
@@ -66,7 +70,11 @@ struct ClothModel {
   Points rest;                   // (n x 3) rest positions (m)
   Triangles triangles;           // (m x 3)
   Eigen::VectorXd mass;          // (n) lumped masses (kg)
-  std::vector<char> pinned;      // (n) 1 if pinned
+  // (n) 1 if the cloth's stages never change its velocity: pinned (held still) or attached
+  // (moving as the caller sets its velocity): of infinite mass to every stage, and outside the
+  // implicit system, whose forces see it at x + dt v
+  std::vector<char> pinned;
+  std::vector<char> attached;    // (n) 1 if attached (then pinned is 1 too)
   Eigen::VectorXd inverse_mass;  // (n) 1 / mass, 0 where pinned (the strain limiter's weights)
   std::vector<int> free_index;   // vertex -> its block in the implicit system, -1 if pinned
   int free_count = 0;

@@ -9,8 +9,14 @@
 // boxes and meshes as obstacles of infinite mass: contact/cloth_obstacles.h), then a cloth
 // pinched between two surfaces holds them apart, then positions. Each of these moves only the
 // velocities v, so that the candidates x + dt v respect them all; the last word is
-// self-collision's, so that no layer passes through another.
+// self-collision's, so that no layer passes through another. A cloth attached to a body
+// (contact/cloth_attachment.h) has its attached vertices' velocities set first, which every
+// stage keeps, and they are put on the body's surface after the positions; a dynamic body
+// takes back what the attachment gave the cloth over the stages it acts in (measured as
+// momentum here, around them).
 #include "cloth/cloth_step.h"
+
+#include <algorithm>
 
 namespace simbake {
 
@@ -39,8 +45,9 @@ class ClothStep {
   ClothStep(SteppedCloth& stepped, ContactBodies& bodies, double dt, const ClothStepSettings& settings,
             StageProfile& profile, SelfCollisionStatistics& stats)
       : cloth_(stepped.cloth), contact_(stepped.contact), self_(stepped.self), obstacles_(stepped.obstacles),
-        bodies_(bodies), dt_(dt), settings_(settings), profile_(profile), stats_(stats),
-        limit_(stepped.cloth.material().strain_limit) {
+        attachment_(stepped.attachment), bodies_(bodies), dt_(dt), settings_(settings), profile_(profile),
+        stats_(stats), limit_(stepped.cloth.material().strain_limit) {
+    if (attachment_) attach();
     self_settings_.thickness = contact_.thickness();
     self_settings_.friction = contact_.friction();
     self_settings_.support = &contact_.support();
@@ -59,6 +66,11 @@ class ClothStep {
       const double reach = std::max(2.0 * contact_.thickness(), contact_.mean_edge());
       obstacles_.begin_step(cloth_, bodies_, contact_.inverse_mass(), dt_, give ? reach : 0.0);
       self_settings_.obstacle_motion = &obstacles_.motions();
+      // attached to an obstacle: its vertices and the obstacle's move as one (the same field),
+      // so an impact zone holding both moves with it rather than holding still
+      const std::vector<int>& chosen = obstacles_.bodies();
+      const auto found = attachment_ ? std::find(chosen.begin(), chosen.end(), attachment_->body()) : chosen.end();
+      if (found != chosen.end()) self_settings_.attachment_motion = &obstacles_.motions()[found - chosen.begin()];
       if (obstacles_.any_yielding()) {
         // the vertices let in: self-collision no longer keeps them out of the obstacles, and a
         // moving obstacle's contacts no longer push them (it passes through them)
@@ -89,7 +101,11 @@ class ClothStep {
     }
     {
       StageTimer timer(profile_, Stage::kClothForces);
-      cloth_.update_velocities(dt_, settings_.gravity, &constraints);
+      reaction_.measured(cloth_, [&] { cloth_.update_velocities(dt_, settings_.gravity, &constraints); });
+      // (the surfaces' impulses on the contacts held in the solve are theirs, not the attachment's)
+      for (const ClothContactConstraint& c : constraints) {
+        if (reaction_.on()) reaction_.not_given(cloth_, c.vertex, c.impulse * c.normal + c.friction);
+      }
     }
     {
       StageTimer timer(profile_, Stage::kClothContacts);
@@ -105,7 +121,7 @@ class ClothStep {
   // (a global pass that leaves the cloth past kGiveStrain x its limit: sweeps alone from then on)
   void limit_strain(bool global) {
     StageTimer timer(profile_, Stage::kClothStrain);
-    cloth_.limit_strain(dt_, global && !sweeps_only_);
+    reaction_.measured(cloth_, [&] { cloth_.limit_strain(dt_, global && !sweeps_only_); });
     if (global && !sweeps_only_ && past_give(cloth_.candidate_strain(dt_))) sweeps_only_ = true;
   }
 
@@ -192,7 +208,11 @@ class ClothStep {
   // when the impact zones do not settle, and stays free of them (counted in the statistics,
   // and the QA warns)
   void hold_still_if_over_budget() {
-    if (self_ && self_->over_budget()) cloth_.velocities().setZero();
+    if (!self_ || !self_->over_budget()) return;
+    const std::vector<char>& attached = cloth_.model().attached;  // (they move as their body does)
+    for (int k = 0; k < cloth_.vertex_count(); ++k) {
+      if (!attached[k]) cloth_.velocities().row(k).setZero();
+    }
   }
 
   void hold_pinched_bodies() {
@@ -200,9 +220,44 @@ class ClothStep {
     contact_.hold_pinched_bodies(cloth_, bodies_, dt_);
   }
 
-  void update_positions() { cloth_.update_positions(dt_); }
+  // positions; the attached vertices put on their body's surface, and a dynamic body given
+  // what the attachment gave the cloth, opposite
+  void update_positions() {
+    cloth_.update_positions(dt_);
+    if (!attachment_) return;
+    attachment_->place(cloth_);
+    if (!reaction_.on()) return;
+    const int b = attachment_->body();
+    StageTimer timer(profile_, Stage::kClothContacts);
+    bodies_.apply_wrench(b, -reaction_.given().linear, -reaction_.given().angular);
+    if (bodies_.asleep(b)) bodies_.wake(b);
+  }
 
  private:
+  // The attached vertices' velocities over the step, and their motion for the impact zones;
+  // with a dynamic body, the reaction's bookkeeping (contact/cloth_attachment.h) starts, and
+  // counts the velocities given
+  void attach() {
+    if (attachment_->reacting(bodies_)) {
+      reaction_.begin(cloth_, bodies_.body(attachment_->body()).center, settings_.gravity, dt_);
+    }
+    reaction_.measured(cloth_, [&] { attachment_->prescribe(cloth_, bodies_, dt_); });
+    self_settings_.attached = &cloth_.model().attached;
+    self_settings_.attachment_motion = &attachment_->motion();
+  }
+
+  // whether self-collision's change of the cloth's momentum is counted as the attachment's
+  // (on_self): with a dynamic body, and no obstacle, pin or still surface (the ground, a
+  // static body holding a vertex this step) that could have absorbed some of it too
+  bool self_counted() const {
+    if (!reaction_.on() || joined_) return false;
+    const ClothModel& m = cloth_.model();
+    for (int k = 0; k < cloth_.vertex_count(); ++k) {
+      if ((m.pinned[k] && !m.attached[k]) || contact_.support()[k].squaredNorm() > 0.0) return false;
+    }
+    return true;
+  }
+
   bool over_limit() const { return limit_ > 0.0 && cloth_.candidate_strain(dt_) > limit_ * (1.0 + kFinalSlack); }
   bool past_give(double strain) const { return limit_ > 0.0 && strain > kGiveStrain * limit_; }
 
@@ -214,7 +269,14 @@ class ClothStep {
     {
       StageTimer timer(profile_, Stage::kClothStrain);
       const std::vector<char>& zones = self_->zone_vertices();
-      pushed = cloth_.limit_strain_holding(dt_, joined_ ? obstacles_.cloth_part(zones) : zones);
+      reaction_.measured(cloth_, [&] {
+        pushed = cloth_.limit_strain_holding(dt_, joined_ ? obstacles_.cloth_part(zones) : zones);
+      });
+      // (what the held zones absorbed, self-collision gives back to them below: not the
+      // attachment's, so taken out here unless that is counted too)
+      if (reaction_.on() && !self_counted()) {
+        for (int k = 0; k < cloth_.vertex_count(); ++k) reaction_.not_given(cloth_, k, -Vec3(pushed.row(k).transpose()));
+      }
     }
     on_self([&](const Points& x, Points& v, const Eigen::VectorXd& w, const SelfCollisionSettings& settings) {
       self_->push_zones(x, v, w, settings, joined_ ? obstacles_.padded(pushed) : pushed);
@@ -223,10 +285,20 @@ class ClothStep {
   }
 
   // f(x, v, inverse mass, settings) on the cloth's arrays, or on those joined with the obstacles'
+  // (with a dynamic body its impulses on the attached vertices, which absorb them, are the
+  // attachment's: counted when nothing else of infinite mass takes part, no obstacle, pin or
+  // still surface under the cloth, and the cloth was not held still)
   template <class F>
   bool on_self(F&& f) {
     StageTimer timer(profile_, Stage::kClothSelfCollision);
-    if (!joined_) return f(cloth_.positions(), cloth_.velocities(), contact_.inverse_mass(), self_settings_);
+    if (!joined_) {
+      const bool counted = self_counted();
+      const long long stills = stats_.stills;
+      const ClothMomentum before = counted ? cloth_momentum(cloth_, reaction_.center()) : ClothMomentum();
+      const bool result = f(cloth_.positions(), cloth_.velocities(), contact_.inverse_mass(), self_settings_);
+      if (counted && stats_.stills == stills) reaction_.add_since(cloth_, before);
+      return result;
+    }
     obstacles_.load(cloth_.velocities(), contact_.support());
     SelfCollisionSettings settings = self_settings_;
     settings.support = &obstacles_.support();
@@ -239,6 +311,7 @@ class ClothStep {
   ClothBodyContact& contact_;
   std::optional<SelfCollision>& self_;
   ClothObstacles& obstacles_;
+  std::optional<ClothAttachment>& attachment_;
   ContactBodies& bodies_;
   const double dt_;
   const ClothStepSettings& settings_;
@@ -248,6 +321,7 @@ class ClothStep {
   SelfCollisionSettings self_settings_;
   bool joined_ = false;                  // the obstacles joined self-collision this step
   bool sweeps_only_ = false;             // the cloth gave: strain limited by sweeps alone
+  AttachmentReaction reaction_;          // attached to a dynamic body: what the attachment gives
 };
 
 }  // namespace

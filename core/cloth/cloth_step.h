@@ -6,6 +6,7 @@
 
 #include "cloth/cloth.h"
 #include "cloth/self_collision.h"
+#include "contact/cloth_attachment.h"
 #include "contact/cloth_body_contact.h"
 #include "contact/cloth_obstacles.h"
 #include "contact/contact_bodies.h"
@@ -24,6 +25,7 @@ struct SteppedCloth {
   ClothBodyContact contact;           // contacts with bodies and ground: their state and scratch
   std::optional<SelfCollision> self;  // self-collision, when on
   ClothObstacles obstacles;           // the bodies its self-collision keeps it from
+  std::optional<ClothAttachment> attachment;  // its attached vertices' body, when it has them
 };
 
 struct ClothStepSettings {
@@ -32,7 +34,8 @@ struct ClothStepSettings {
 };
 
 // One step of dt (s) of the cloth against the bodies (contact/contact_bodies.h: what the
-// contacts do to the bodies is recorded there, for the world to apply), each sub-stage timed
+// contacts, and the attachment's reaction, do to the bodies is recorded there, for the world
+// to apply), its attached vertices carried by their body; each sub-stage timed
 // into `profile`, self-collision's work counted into `stats`. True when the cloth gave way
 // this step (stretched past what its strain limit can hold: cloth_step.cpp, kGiveStrain)
 bool step_cloth(SteppedCloth& cloth, ContactBodies& bodies, double dt, const ClothStepSettings& settings,

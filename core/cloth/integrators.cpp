@@ -19,8 +19,9 @@
 // only), so M + dt^2 H + damping dt H_m is symmetric positive definite. It is assembled
 // straight into an Eigen sparse matrix of fixed pattern (MatrixPattern, built once) over the
 // unpinned vertices only (pinned rows and columns removed: their velocity is zero and stays
-// so), elastic and damping terms in one pass over the elements, scaled by M^-1/2 on both
-// sides, and solved by preconditioned conjugate gradients (our own loop, multiplying the
+// so; an attached vertex's is what its attachment prescribed, and stays so: the elastic and
+// damping forces on its neighbours see it at x + dt v), elastic and damping terms in one
+// pass over the elements, scaled by M^-1/2 on both sides, and solved by preconditioned conjugate gradients (our own loop, multiplying the
 // preconditioner's 3x3-block copy of the matrix: 1.4x fewer bytes than Eigen's scalar one)
 // to a relative residual `tolerance`, started from zero. The preconditioner (cloth/multigrid.h)
 // is a smoothed-aggregation multigrid V-cycle, whose iteration count stays nearly flat as
@@ -425,16 +426,16 @@ void update_velocities(const ClothModel& model, ClothData& data, ClothSolver& so
   } else {
     explicit_velocities(model, data, dt, gravity, constraints);
   }
-  // pinned vertices never move
+  // pinned vertices never move; attached ones keep the velocity their attachment gave them
   for (int k = 0; k < static_cast<int>(data.x.rows()); ++k) {
-    if (model.pinned[k]) data.v.row(k).setZero();
+    if (model.pinned[k] && !model.attached[k]) data.v.row(k).setZero();
   }
 }
 
 void update_positions(const ClothModel& model, ClothData& data, double dt) {
   require(dt > 0.0 && std::isfinite(dt), "dt must be > 0");
   for (int k = 0; k < static_cast<int>(data.x.rows()); ++k) {
-    if (model.pinned[k]) {
+    if (model.pinned[k] && !model.attached[k]) {
       data.v.row(k).setZero();
     } else {
       data.x.row(k) += dt * data.v.row(k);

@@ -54,11 +54,13 @@ bool uses_multigrid(const ClothSolver& solver);
 
 // Forces (stretch/shear or membrane, bending, damping), gravity and the velocity update over
 // dt (s): explicit or implicit (backward Euler), with the contacts `constraints` (at most one
-// per free vertex; pinned ones are skipped) held inside it, or null. Pinned vertices never move
+// per free vertex; pinned ones are skipped) held inside it, or null. Pinned vertices never move;
+// attached ones (ClothDesc::attached) keep the velocity they came with, which the forces on the
+// rest of the cloth see (at x + dt v), as the solve sees a pinned vertex at rest
 void update_velocities(const ClothModel& model, ClothData& data, ClothSolver& solver, double dt, const Vec3& gravity,
                        std::vector<ClothContactConstraint>* constraints);
 
-// x += dt v; pinned vertices stay where they are
+// x += dt v; pinned vertices stay where they are, attached ones move with their velocity
 void update_positions(const ClothModel& model, ClothData& data, double dt);
 
 }  // namespace simbake

@@ -14,7 +14,8 @@
 //      approach; a few Gauss-Seidel passes;
 //   3. rigid impact zones (Provot 1997), the fail-safe: vertices of the collisions still left
 //      are merged into zones, each zone moved rigidly (its linear and angular momentum kept),
-//      and detection repeated until none is left; a zone holding a pinned vertex stays still.
+//      and detection repeated until none is left; a zone holding a pinned vertex stays still,
+//      one holding attached vertices moves with their attachment.
 // Impulses are shared by the pair's vertices in proportion to their weights and inverse
 // masses (pinned vertices have none), so momentum is conserved.
 //
@@ -145,6 +146,11 @@ struct SelfCollisionSettings {
   // (obstacles) or null: each obstacle's motion over the step (the impact zones that hold an
   // obstacle's vertices move with it; without it, they hold still)
   const std::vector<ObstacleMotion>* obstacle_motion = nullptr;
+  // (cloth vertices) or null: 1 for the cloth's attached vertices (ClothDesc::attached), and
+  // their attachment's motion over the step: the impact zones that hold them move with it
+  // (without it, they hold still, as at a pin)
+  const std::vector<char>* attached = nullptr;
+  const ObstacleMotion* attachment_motion = nullptr;
   // (n) or null: 1 for the cloth's vertices that the obstacles no longer keep out (let in,
   // they pass through the cloth there: contact/cloth_obstacles.h, yielding): pairs of an
   // obstacle and an item with such a vertex are not tested

@@ -20,23 +20,33 @@ namespace {
 // zone holding vertices of infinite mass moves as they do: those of one obstacle (obstacle_of
 // >= 0) give the zone that obstacle's motion (motions[obstacle]), which carries the zone and
 // the obstacle by one invertible affine map, so that nothing in the zone passes through the
-// obstacle; a pinned cloth vertex, or two obstacles, hold the zone still, and so does the
+// obstacle; attached cloth vertices give it their attachment's (settings.attachment_motion);
+// a pinned cloth vertex, or two of these, hold the zone still, and so does the
 // surface under it where the obstacle would carry one of its vertices into that surface
 // faster than `sink` (m/s): the obstacle then passes through the cloth (returns true).
 // Vertices of infinite mass keep their own velocities.
 bool move_rigidly(const std::vector<int>& zone, const Points& x, Points& v, const Eigen::VectorXd& inverse_mass,
                   const Points* impulse, const std::vector<int>& obstacle_of, int cloth_vertices,
-                  const std::vector<ObstacleMotion>* motions, const std::vector<Vec3>* support, double sink) {
-  int held_by = -1;       // the obstacle the zone holds, if one
-  bool still = false;     // a pinned vertex, or two obstacles
+                  const SelfCollisionSettings& settings, double sink) {
+  const std::vector<ObstacleMotion>* motions = settings.obstacle_motion;
+  const std::vector<Vec3>* support = settings.support;
+  const ObstacleMotion* attachment = settings.attached ? settings.attachment_motion : nullptr;
+  const ObstacleMotion* motion = nullptr;  // the one motion the zone's vertices of infinite mass share
+  bool held = false, still = false;        // still: a pinned vertex, or two motions
   for (int i : zone) {
     if (inverse_mass[i] > 0.0) continue;
-    const int o = i >= cloth_vertices && motions ? obstacle_of[i - cloth_vertices] : -1;
-    if (o < 0 || (held_by >= 0 && held_by != o)) still = true;
-    held_by = o;
+    const ObstacleMotion* own = nullptr;
+    if (i >= cloth_vertices) {
+      if (motions) own = &(*motions)[obstacle_of[i - cloth_vertices]];
+    } else if (attachment && (*settings.attached)[i]) {
+      own = attachment;
+    }
+    if (!own || (held && own != motion)) still = true;
+    motion = own;
+    held = true;
   }
-  if (still || held_by >= 0) {
-    const ObstacleMotion* motion = still ? nullptr : &(*motions)[held_by];
+  if (held) {
+    if (still) motion = nullptr;
     // An obstacle that would carry a vertex of the zone into the still surface it rests on (a
     // keyed box pressing the cloth into the ground) cannot be followed: the cloth cannot be in
     // two places. The surface holds the zone, as a pin would, and the obstacle passes through
@@ -111,8 +121,7 @@ void SelfCollision::push_zones(const Points& x, Points& v, const Eigen::VectorXd
   const double sink = collision_tolerance(settings) / passes_.dt;
   for (const std::vector<int>& zone : zone_members()) {
     if (!zone.empty()) {
-      move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings.obstacle_motion,
-                   settings.support, sink);
+      move_rigidly(zone, x, v, inverse_mass, &impulse, obstacle_of_, cloth_vertices_, settings, sink);
     }
   }
 }
@@ -163,18 +172,19 @@ void SelfCollision::impact_zones(const Points& x, Points& v, const Eigen::Vector
     for (const std::vector<int>& zone : zone_members()) {
       if (zone.empty()) continue;
       stats.zone_vertices += static_cast<long long>(zone.size());
-      stats.yields += move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_,
-                                   settings.obstacle_motion, settings.support, sink);
+      stats.yields += move_rigidly(zone, x, v, inverse_mass, nullptr, obstacle_of_, cloth_vertices_, settings, sink);
     }
   }
   // the last resort: the cloth does not move, and a cloth free of crossings stays free of them
-  // (unless a moving obstacle runs into it: obstacles move as they must)
+  // (unless a moving obstacle or attachment runs into it: those move as they must)
   collision_contacts(x, v, dt, settings, contacts, stats);
   if (over_budget_) return;  // (the caller holds the cloth still)
   outside_zones(contacts);
   if (contacts.empty()) return;
   ++stats.stills;
-  v.topRows(cloth_vertices_).setZero();
+  for (int i = 0; i < cloth_vertices_; ++i) {
+    if (inverse_mass[i] > 0.0) v.row(i).setZero();
+  }
 }
 
 }  // namespace simbake

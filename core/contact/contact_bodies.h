@@ -59,11 +59,13 @@ struct ContactGround {
   double friction = 0.5;  // Coulomb coefficient
 };
 
-// An impulse J (N s) the contacts gave body b at world point p
+// An impulse J (N s) the contacts gave body b at world point p, and an angular impulse
+// (N m s, about its centre of mass) besides
 struct BodyImpulse {
   int body;
   Vec3 point;
   Vec3 impulse;
+  Vec3 angular = Vec3::Zero();
 };
 
 // A move of body b's position only, by a pseudo-velocity (v m/s, omega rad/s) over dt (s):
@@ -105,6 +107,13 @@ class ContactBodies {
     v_[b] += bodies_[b].inverse_mass * J;
     l_[b] += (p - bodies_[b].center).cross(J);
     impulses_.push_back({b, p, J});
+  }
+  // impulse J (N s) and angular impulse H (N m s, about its centre of mass) on dynamic body b:
+  // v += J / m, L += H (a cloth's attachment: contact/cloth_attachment.h)
+  void apply_wrench(int b, const Vec3& J, const Vec3& H) {
+    v_[b] += bodies_[b].inverse_mass * J;
+    l_[b] += H;
+    impulses_.push_back({b, bodies_[b].center, J, H});
   }
   // world I^-1 of dynamic body b now (1/(kg m^2))
   Mat3 inverse_inertia(int b) const {

@@ -48,30 +48,61 @@ double DeformingSurface::reach(const Vec3& center) const {
   return r;
 }
 
-// Cells of about the mean distance between neighbouring vertices: the bounding box's volume
-// shared among the vertices
-void DeformingSurface::bin() {
-  const Vec3 size = (end_.colwise().maxCoeff() - end_.colwise().minCoeff()).transpose();
-  const double volume = std::max(size.prod(), std::pow(std::max(size.maxCoeff(), 1e-6), 3) * 1e-6);
-  cell_ = std::max(std::cbrt(volume / static_cast<double>(end_.rows())), 1e-6);
-  grid_.clear();
-  for (Eigen::Index k = 0; k < end_.rows(); ++k) grid_[key(end_.row(k).transpose(), 0, 0, 0)].push_back(static_cast<int>(k));
+double DeformingSurface::fastest_in(const Box3& box) const {
+  double fastest = 0.0;
+  for (Eigen::Index k = 0; k < end_.rows(); ++k) {
+    const Vec3 a = start_.row(k).transpose(), b = end_.row(k).transpose();
+    if (box.intersects(Box3(a.cwiseMin(b), a.cwiseMax(b)))) {
+      fastest = std::max(fastest, velocity_.row(k).norm());
+    }
+  }
+  return fastest;
 }
 
-std::int64_t DeformingSurface::key(const Vec3& p, int dx, int dy, int dz) const {
-  const auto c = [&](double x, int d) { return static_cast<std::int64_t>(std::floor(x / cell_)) + d + (1 << 20); };
-  return (c(p.x(), dx) << 42) ^ (c(p.y(), dy) << 21) ^ c(p.z(), dz);
+// Cells of about the mean distance between neighbouring vertices: the bounding box's volume
+// shared among the vertices (at most kCellsPerVertex cells a vertex: a flat surface's box has
+// next to no volume), counted into a flat array of cells (a cell's vertices in index order)
+void DeformingSurface::bin() {
+  constexpr double kCellsPerVertex = 64.0;
+  const Vec3 lo = end_.colwise().minCoeff().transpose(), hi = end_.colwise().maxCoeff().transpose();
+  const Vec3 size = hi - lo;
+  const double volume = std::max(size.prod(), std::pow(std::max(size.maxCoeff(), 1e-6), 3) * 1e-6);
+  const double n = static_cast<double>(end_.rows());
+  cell_ = std::max(std::cbrt(volume / n), 1e-6);
+  const auto cells = [&] { return ((size / cell_).array().floor() + 2.0).prod(); };
+  while (cells() > kCellsPerVertex * n + 64.0) cell_ *= 1.25;
+  corner_ = (lo / cell_).array().floor().cast<int>().matrix();
+  extent_ = (hi / cell_).array().floor().cast<int>().matrix() - corner_ + Eigen::Vector3i::Ones();
+  const auto index = [&](const Eigen::Vector3i& c) { return (c.z() * extent_.y() + c.y()) * extent_.x() + c.x(); };
+  cell_start_.assign(static_cast<size_t>(extent_.prod()) + 1, 0);
+  std::vector<int> cell(end_.rows());
+  for (Eigen::Index k = 0; k < end_.rows(); ++k) {
+    cell[k] = index(cell_of(end_.row(k).transpose()));
+    ++cell_start_[cell[k] + 1];
+  }
+  for (size_t c = 1; c < cell_start_.size(); ++c) cell_start_[c] += cell_start_[c - 1];
+  cell_vertex_.resize(end_.rows());
+  std::vector<int> next(cell_start_.begin(), cell_start_.end() - 1);
+  for (Eigen::Index k = 0; k < end_.rows(); ++k) cell_vertex_[next[cell[k]]++] = static_cast<int>(k);
+}
+
+// (relative to corner_)
+Eigen::Vector3i DeformingSurface::cell_of(const Vec3& p) const {
+  return (p / cell_).array().floor().cast<int>().matrix() - corner_;
 }
 
 Vec3 DeformingSurface::velocity_at(const Vec3& p) const {
   int best = -1;
   double nearest = std::numeric_limits<double>::infinity();
-  for (int dx = -1; dx <= 1; ++dx) {
+  const Eigen::Vector3i c = cell_of(p);
+  for (int dz = -1; dz <= 1; ++dz) {
     for (int dy = -1; dy <= 1; ++dy) {
-      for (int dz = -1; dz <= 1; ++dz) {
-        const auto found = grid_.find(key(p, dx, dy, dz));
-        if (found == grid_.end()) continue;
-        for (int k : found->second) {
+      for (int dx = -1; dx <= 1; ++dx) {
+        const Eigen::Vector3i q = c + Eigen::Vector3i(dx, dy, dz);
+        if ((q.array() < 0).any() || (q.array() >= extent_.array()).any()) continue;
+        const int cell = (q.z() * extent_.y() + q.y()) * extent_.x() + q.x();
+        for (int i = cell_start_[cell]; i < cell_start_[cell + 1]; ++i) {
+          const int k = cell_vertex_[i];
           const double d = (end_.row(k).transpose() - p).squaredNorm();
           if (d < nearest || (d == nearest && k < best)) nearest = d, best = k;
         }

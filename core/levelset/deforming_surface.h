@@ -16,8 +16,6 @@
 #include "levelset/signed_distance.h"
 #include "math/types.h"
 
-#include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 namespace simbake {
@@ -42,6 +40,9 @@ class DeformingSurface {
   SignedDistancePtr shape_at(double s) const;
   // the farthest any vertex is from `center` over the frame (m)
   double reach(const Vec3& center) const;
+  // the fastest of the vertices whose line over the frame may meet `box` (its bounding box
+  // does) (m/s), 0 if none
+  double fastest_in(const Box3& box) const;
   // the affine field v = A x + c nearest (least squares over the vertices, at blend s) to the
   // vertices' velocities: the motion of the cloth's impact zones that hold the surface's
   // vertices (cloth/self_collision.h, ObstacleMotion); exact for a surface that swells, turns
@@ -53,10 +54,13 @@ class DeformingSurface {
   Points velocity_;                     // (n x 3) (end - start) / duration (m/s)
   SignedDistancePtr start_shape_, end_shape_;
   double start_time_ = 0.0, duration_ = 0.0;  // (s)
-  // the vertices at the frame's end, binned on a grid of `cell_` (m): velocity_at's search
+  // the vertices at the frame's end binned on a grid of cells of `cell_` (m), the cell of x at
+  // floor(x / cell_) (whole multiples), from cell corner_ on, extent_ cells a side: cell c's
+  // vertices are cell_vertex_[cell_start_[c] .. cell_start_[c + 1]) (velocity_at's search)
   double cell_ = 1.0;
-  std::unordered_map<std::int64_t, std::vector<int>> grid_;
-  std::int64_t key(const Vec3& p, int dx, int dy, int dz) const;
+  Eigen::Vector3i corner_ = Eigen::Vector3i::Zero(), extent_ = Eigen::Vector3i::Ones();
+  std::vector<int> cell_start_, cell_vertex_;
+  Eigen::Vector3i cell_of(const Vec3& p) const;
   void bin();
 };
 

@@ -50,6 +50,7 @@ void apply_contact_results(const ContactBodies& bodies, const RigidModel& model,
   for (const BodyImpulse& i : bodies.impulses()) {
     data.v[i.body] += model.defs[i.body].inverse_mass * i.impulse;
     data.l[i.body] += (i.point - data.x[i.body]).cross(i.impulse);
+    if (!i.angular.isZero(0.0)) data.l[i.body] += i.angular;
   }
   for (int b : bodies.woken()) wake_island(model, data, b);
   for (const BodyDisplacement& d : bodies.displacements()) {

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "cloth/cloth_step.h"
+#include "levelset/deforming_surface.h"
 #include "rigid/rigid_data.h"
 #include "world/world_settings.h"
 
@@ -21,8 +22,11 @@ struct FrameSchedule {
 // substeps keep its turn per substep within WorldSettings::joint_turn
 double jointed_turn_rate(const RigidModel& model, const RigidData& data);
 
-// The automatic schedule of the frame of length frame_dt (s) that starts at `time` (s)
+// The automatic schedule of the frame of length frame_dt (s) that starts at `time` (s);
+// `surfaces` (body index, null or missing for a body that does not deform) the deforming
+// colliders' surfaces over that frame
 FrameSchedule frame_schedule(const RigidModel& model, const RigidData& data, const std::vector<SteppedCloth>& cloths,
-                             const WorldSettings& settings, double time, double frame_dt);
+                             const WorldSettings& settings, double time, double frame_dt,
+                             const std::vector<const DeformingSurface*>& surfaces = {});
 
 }  // namespace simbake

@@ -76,6 +76,20 @@ int World::add_cloth(const ClothDesc& desc) {
   return cloth_count() - 1;
 }
 
+void World::attach_cloth(int i, int b) {
+  if (!(i >= 0 && i < cloth_count())) throw std::invalid_argument("attach_cloth: cloth " + std::to_string(i) + " does not exist");
+  if (!(b >= 0 && b < body_count())) throw std::invalid_argument("attach_cloth: body " + std::to_string(b) + " does not exist");
+  SteppedCloth& cloth = cloths_[i];
+  std::vector<int> vertices;
+  const std::vector<char>& attached = cloth.cloth.model().attached;
+  for (int k = 0; k < cloth.cloth.vertex_count(); ++k) {
+    if (attached[k]) vertices.push_back(k);
+  }
+  if (vertices.empty()) throw std::invalid_argument("attach_cloth: cloth " + std::to_string(i) + " has no attached vertices");
+  describe_bodies(rigid_model_, rigid_data_, coupling_, time_);
+  cloth.attachment.emplace(cloth.cloth, vertices, b, coupling_.bodies);
+}
+
 void World::set_kinematic_track(int i, KinematicTrack track) {
   if (!(i >= 0 && i < body_count() && rigid_model_.defs[i].kinematic)) {
     throw std::invalid_argument("only kinematic bodies follow keys");
@@ -85,11 +99,11 @@ void World::set_kinematic_track(int i, KinematicTrack track) {
 }
 
 int World::automatic_substeps(double frame_dt) const {
-  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt).substeps;
+  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt, rigid_scratch_.surfaces).substeps;
 }
 
 int World::automatic_cloth_steps(double frame_dt) const {
-  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt).cloth_steps;
+  return frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt, rigid_scratch_.surfaces).cloth_steps;
 }
 
 int World::step_frame(double frame_dt, int substeps, const std::function<bool()>& stop) {
@@ -97,7 +111,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   // the cloths step once every `group` substeps, over the group's time (a fixed substep
   // count steps them every substep)
   const FrameSchedule schedule = substeps > 0 ? FrameSchedule{substeps, substeps}
-                                             : frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt);
+                                             : frame_schedule(rigid_model_, rigid_data_, cloths_, settings_, time_, frame_dt, rigid_scratch_.surfaces);
   int n = std::min(schedule.substeps, settings_.max_substeps);
   double dt = frame_dt / n;
   const int cloth_steps = std::min(schedule.cloth_steps, n);
@@ -219,6 +233,10 @@ void World::step_cloths(double dt) {
   if (!cloths_.empty()) ++stats_.cloth_steps;
   const ClothStepSettings cloth_settings{settings_.gravity, settings_.cloth_contacts_in_solve};
   for (SteppedCloth& cloth : cloths_) {
+    if (!cloth.attachment && std::find(cloth.cloth.model().attached.begin(), cloth.cloth.model().attached.end(), 1) !=
+                                 cloth.cloth.model().attached.end()) {
+      throw std::logic_error("a cloth with attached vertices steps only once attached to a body (World::attach_cloth)");
+    }
     // the bodies as the contacts see them, posed as they are now (only the pinches at the
     // end of this cloth's step move them); what the contacts did to them, applied after
     describe_bodies(rigid_model_, rigid_data_, coupling_, time_);
@@ -242,6 +260,11 @@ void World::set_deforming_frame(int i, const Points& vertices, SignedDistancePtr
   std::vector<std::shared_ptr<DeformingSurface>>& surfaces = coupling_.surfaces;
   surfaces.resize(body_count());
   if (!surfaces[i]) {
+    for (const SteppedCloth& cloth : cloths_) {
+      if (cloth.attachment && cloth.attachment->body() == i) {
+        throw std::invalid_argument("a body a cloth is attached to becomes deforming only before the attachment");
+      }
+    }
     surfaces[i] = std::make_shared<DeformingSurface>(vertices, shape, time_);
   } else {
     surfaces[i]->set_frame(vertices, shape, time_, frame_dt);

@@ -40,6 +40,11 @@ class World {
   Cloth& cloth(int i) { return cloths_[i].cloth; }
   // the edges of cloth i, (j, k) with j < k, sorted
   const std::vector<std::array<int, 2>>& cloth_edges(int i) const { return cloths_[i].contact.edges(); }
+  // Attaches cloth i's attached vertices (ClothDesc::attached) to body b's surface where they
+  // are now (contact/cloth_attachment.h: bound to its nearest surface point, carried with it
+  // from then on; a dynamic body takes the reaction). A deforming body's surface must be set
+  // first (set_deforming_frame). A cloth with attached vertices must be attached before it steps
+  void attach_cloth(int i, int b);
   // Validates and adds a joint between two bodies (or a body and the world, kWorldBody);
   // returns its index
   int add_joint(const JointDesc& desc);

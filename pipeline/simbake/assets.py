@@ -29,8 +29,8 @@ import numpy as np
 
 from . import _core
 from .errors import SceneError
-from .files import check_input_file, write_atomically
-from .limits import check_mesh_extent
+from .files import write_atomically
+from .mesh_files import load_mesh, read_triangles
 from .scene import Body, Scene
 
 SPHERE_SUBDIVISIONS = 8  # 386 samples on a sphere, 0.5% faceting of the radius
@@ -68,52 +68,6 @@ def cache_dir() -> Path:
         return Path(os.environ["SIMBAKE_CACHE_DIR"])
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "simbake"
-
-
-def read_triangles(path: Path, file: str | Path, key: str, process: bool):
-    """The trimesh.Trimesh in any file trimesh reads, with at least one triangle, or a
-    one-line SceneError. process=False keeps the file's vertex order."""
-    import trimesh
-
-    check_input_file(path, file, key)
-    try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
-        if isinstance(mesh, trimesh.Trimesh) and not np.isfinite(mesh.vertices).all():
-            # before trimesh's processing drops them, and before a test NaN would confuse
-            raise SceneError(file, key, f"{path} has non-finite vertex coordinates (NaN or infinity)")
-        if isinstance(mesh, trimesh.Trimesh):
-            check_mesh_extent(mesh.vertices, file, key, path)
-        if process and isinstance(mesh, trimesh.Trimesh):
-            mesh.process()
-    except SceneError:
-        raise
-    except Exception as error:  # trimesh raises many kinds; all mean "cannot read this"
-        if isinstance(error, ImportError) and error.name in ("charset_normalizer", "chardet"):
-            # trimesh guesses the encoding of a text format that is not UTF-8 with these
-            detail = f"not UTF-8 text ({path.suffix or 'this'} files are text; is it binary or damaged?)"
-        elif isinstance(error, ImportError):  # a format whose optional reader is not installed
-            detail = f"no reader for {path.suffix or 'such'} files in this installation ({error})"
-        else:
-            detail = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise SceneError(file, key, f"cannot read mesh {path}: {detail}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise SceneError(file, key, f"{path} holds no triangles")
-    return mesh
-
-
-def load_mesh(path: Path, file: str | Path, key: str) -> tuple[np.ndarray, np.ndarray]:
-    """A closed triangle mesh from any file trimesh reads, or a SceneError."""
-    mesh = read_triangles(path, file, key, process=True)
-    if not mesh.is_watertight:
-        raise SceneError(file, key, f"{path} is not a closed mesh (it has holes or open edges); "
-                                    "a rigid body needs a closed surface")
-    if not mesh.is_winding_consistent:
-        raise SceneError(file, key, f"{path} has inconsistently wound triangles")
-    if mesh.volume < 0:
-        mesh.invert()  # inside out: turn it the right way
-    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
-    triangles = np.ascontiguousarray(mesh.faces, dtype=np.int32)
-    return vertices, triangles
 
 
 def shell_voxel_size(vertices: np.ndarray, triangles: np.ndarray, thickness: float) -> float:
@@ -336,14 +290,15 @@ def load_cloth(scene: Scene, index: int) -> ClothAsset:
         return ClothAsset(np.ascontiguousarray(cloth.mesh_vertices, dtype=np.float64),
                           np.ascontiguousarray(cloth.mesh_triangles, dtype=np.int32))
     if cloth.mesh_path is not None:
-        # the file's vertex order is kept: `pinned` indexes the file's vertices
+        # the file's vertex order is kept: `pinned` and `attach` index the file's vertices
         mesh = read_triangles(cloth.mesh_path, file, f"{key}.mesh", process=False)
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
         triangles = np.asarray(mesh.faces, dtype=np.int32)
     else:
         vertices, triangles = grid_mesh(cloth.grid_size, cloth.grid_resolution)
-    bad = [p for p in cloth.pinned if p >= len(vertices)]
-    if bad:
-        raise SceneError(file, f"{key}.pinned", f"vertex {bad[0]} does not exist (the cloth has {len(vertices)})")
+    for name, indices in (("pinned", cloth.pinned), ("attach.points", cloth.attached)):
+        bad = [p for p in indices if p >= len(vertices)]
+        if bad:
+            raise SceneError(file, f"{key}.{name}", f"vertex {bad[0]} does not exist (the cloth has {len(vertices)})")
     placed = _rotate(cloth.orientation, vertices) + np.asarray(cloth.position)
     return ClothAsset(np.ascontiguousarray(placed), np.ascontiguousarray(triangles))

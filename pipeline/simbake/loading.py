@@ -14,7 +14,7 @@ from pathlib import Path
 from dataclasses import replace
 
 from .limits import check_scene
-from .scene import Scene, frame_range, load_toml_scene, stage_range
+from .scene import Scene, frame_range, load_toml_scene, read_sequences, stage_range
 
 __all__ = ["USD_SCENE_SUFFIXES", "is_usd_scene", "load_scene", "with_frames"]
 
@@ -39,7 +39,7 @@ def load_scene(path: str | os.PathLike[str], *, start_frame: int | None = None,
         if frames is not None and None in frames:  # one end given: the other is the stage's
             frames = stage_range(load_shot(path, None), frames)
         return load_shot(path, frames)
-    return with_frames(load_toml_scene(file), start_frame, end_frame)
+    return with_frames(load_toml_scene(file, frames), start_frame, end_frame)
 
 
 def with_frames(scene: Scene, start_frame: int | None = None, end_frame: int | None = None) -> Scene:
@@ -59,4 +59,4 @@ def with_frames(scene: Scene, start_frame: int | None = None, end_frame: int | N
         return load_shot(scene.source or scene.shot.path, frames)
     ranged = replace(scene, start_frame=frames[0], end_frame=frames[1])
     check_scene(ranged)
-    return ranged
+    return read_sequences(ranged)  # a deforming body's frames: those of the new range

@@ -5,7 +5,11 @@ UsdGeom gprim a USD shot's bodies are (`Cube`, `Sphere`, `Capsule`, `Cylinder`, 
 tessellated once per prim: hard edges for the cube, smooth elsewhere; a `Plane` as a finite
 quad) and every `PointInstancer`'s prototype meshes and gprims at each instance, with their
 full composed transforms at each time and a mesh's authored normals (so a preview shades as
-a renderer would: smooth where the cache says smooth), under a key light and a fill from the
+a renderer would: smooth where the cache says smooth). A mesh that UsdSkel skins (a shot's
+character, in a `--shot` stage) is drawn at each frame's pose: OpenUSD's own skinning
+(`UsdSkelSkinningQuery.ComputeSkinnedPoints`, then the skeleton's world transform, as
+simbake.usd_deforming reads it for the solver), shaded by normals of the skinned surface
+(simbake.normals, its creases kept). All under a key light and a fill from the
 camera, on a checkered ground plane. Double-sided meshes and SimbakeClothAPI meshes (the
 cloth) show their front in orange and their back in blue, so a layer passing through
 another, or a cloth seen from behind, shows at once. Guides (level sets) are not drawn.
@@ -43,6 +47,7 @@ import numpy as np
 
 from .errors import SceneError
 from .files import check_input_file, check_output_path, write_atomically
+from .normals import corner_normals
 
 OUTPUT_SUFFIXES = (".png", ".mp4", ".gif")
 SHEET_FRAMES = 8                 # frames on a contact sheet when --frames is not given
@@ -139,6 +144,7 @@ class _Drawable:
     proto_index: int = -1
     points: np.ndarray | None = None   # a gprim's tessellation (prim space), fixed: (p, 3)
     normals: np.ndarray | None = None  # and its normal at each triangle corner: (3t, 3)
+    skinning: tuple | None = None      # (UsdSkelSkinningQuery, UsdSkelSkeletonQuery) of a skinned mesh
 
 
 def _color(name: str) -> tuple[float, float, float]:
@@ -329,9 +335,50 @@ class CacheGeometry:
                     self.drawables.append(d)
                     if prim.IsA(UsdGeom.Plane):
                         self.planes.append(prim)
+        self._find_skinned()
+        self._skinned_at: tuple[float, dict] = (math.nan, {})
         self.ground_plane = None         # the Plane drawn as the checkered ground, if any
         self.ground_height = self._recorded_ground()
         self._find_ground_plane()
+
+    def _find_skinned(self) -> None:
+        """The meshes UsdSkel skins: under a SkelRoot, bound to a skeleton, with joint influences."""
+        from pxr import Usd, UsdSkel
+
+        meshes = {d.prim.GetPath(): d for d in self.drawables if d.points is None and d.instancer is None}
+        roots = [p for p in self.stage.Traverse() if p.IsA(UsdSkel.Root)]
+        for root in roots:
+            cache = UsdSkel.Cache()
+            cache.Populate(UsdSkel.Root(root), Usd.PrimDefaultPredicate)
+            for prim in Usd.PrimRange(root):
+                d = meshes.get(prim.GetPath())
+                if d is None:
+                    continue
+                query = cache.GetSkinningQuery(prim)
+                skeleton = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+                skel_query = cache.GetSkelQuery(skeleton) if skeleton else None
+                if query and skel_query and query.HasJointInfluences():
+                    d.skinning = (query, skel_query)
+
+    def _skinned(self, d: _Drawable, time: float, xforms) -> tuple[np.ndarray, np.ndarray] | None:
+        """A skinned mesh's points at `time` in its skeleton's space and that space's world
+        matrix (row vectors); None when UsdSkel cannot skin it then. Kept for the last time
+        asked (bounds and triangles ask for the same frame)."""
+        from pxr import Usd, UsdGeom
+
+        if self._skinned_at[0] != time:
+            self._skinned_at = (time, {})
+        found = self._skinned_at[1]
+        path = d.prim.GetPath()
+        if path not in found:
+            query, skel_query = d.skinning
+            code = Usd.TimeCode(time)
+            points = UsdGeom.Mesh(d.prim).GetPointsAttr().Get(code)
+            ok = points is not None and len(points) > 0 and \
+                query.ComputeSkinnedPoints(skel_query.ComputeSkinningTransforms(code), points, code)
+            found[path] = (np.asarray(points, dtype=np.float64),
+                           np.array(xforms.GetLocalToWorldTransform(skel_query.GetPrim()))) if ok else None
+        return found[path]
 
     def _recorded_ground(self) -> float | None:
         """The ground height a TOML scene's cache records in its customLayerData."""
@@ -419,11 +466,21 @@ class CacheGeometry:
 
         cache = UsdGeom.BBoxCache(time, [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], True)
         box = cache.ComputeWorldBound(self.stage.GetPseudoRoot()).ComputeAlignedRange()
-        if self.planes:  # a 10 m or "infinite" ground, walls: framed is what else is drawn
+        skinned = [d for d in self.drawables if d.skinning is not None]
+        # a 10 m or "infinite" ground, walls: framed is what else is drawn; a skinned mesh's
+        # extent is its rest pose's, so it is framed by its skinned points
+        if self.planes or skinned:
             framed = Gf.Range3d()
-            for prim in {(d.instancer.GetPrim() if d.instancer else d.prim) for d in self.drawables}:
+            for prim in {(d.instancer.GetPrim() if d.instancer else d.prim) for d in self.drawables
+                         if d.skinning is None}:
                 if not prim.IsA(UsdGeom.Plane):
                     framed.UnionWith(cache.ComputeWorldBound(prim).ComputeAlignedRange())
+            xforms = UsdGeom.XformCache(time)
+            for d in skinned:
+                posed = self._skinned(d, time, xforms)
+                if posed is not None and len(posed[0]):
+                    world = posed[0] @ posed[1][:3, :3] + posed[1][3, :3]
+                    framed.UnionWith(Gf.Range3d(Gf.Vec3d(*world.min(axis=0)), Gf.Vec3d(*world.max(axis=0))))
             if not framed.IsEmpty():
                 box = framed
         if box.IsEmpty():
@@ -441,8 +498,15 @@ class CacheGeometry:
         xforms = UsdGeom.XformCache(time)
         parts = []
         for d in self.drawables:
+            to_world = None
             if d.points is not None:  # a gprim: its tessellation
                 points, normals = d.points, d.normals
+            elif d.skinning is not None:  # posed by UsdSkel, in its skeleton's space
+                posed = self._skinned(d, time, xforms)
+                if posed is None or len(d.corners) == 0 or d.corners.max() >= len(posed[0]):
+                    continue
+                points, to_world = posed
+                normals = corner_normals(points, d.corners.reshape(-1, 3))
             else:
                 mesh = UsdGeom.Mesh(d.prim)
                 points = mesh.GetPointsAttr().Get(time)
@@ -453,7 +517,9 @@ class CacheGeometry:
                     continue  # topology and points disagree: nothing sensible to draw
                 normals = self._corner_normals(mesh, d, points, time)
             p = points[d.corners]
-            if d.instancer is None:
+            if to_world is not None:
+                matrices = [to_world]
+            elif d.instancer is None:
                 matrices = [np.array(xforms.GetLocalToWorldTransform(d.prim))]
             else:
                 matrices = self._instance_matrices(d, xforms, time)

@@ -30,6 +30,11 @@ Thresholds (``THRESHOLDS``; a figure *above* its threshold is a warning):
   slider; past the range for a distance joint), over the joints not broken. The solver closes
   joints to well under a micrometre; a millimetre at a chain link or a hinge shows in a
   close-up.
+* ``attachment_drift``: 1 mm (scenes with cloth attachments). The largest distance of an
+  attached cloth point from where its body carries it (its bound surface point and offset, at
+  the body's pose or the deforming collider's own mesh at that frame: simbake.qa_attachments,
+  measured apart from the solver). The solver puts them there exactly; a millimetre is a seam
+  that visibly opens.
 * ``cloth_fallbacks``: 0. The cloth steps' fallbacks in the frame (README, "Bounded work"):
   steps a cloth held still (its impact zones did not settle, or its self-collision ran out
   of its work budget), impact zones a keyed body would have pressed into the ground, steps
@@ -48,9 +53,11 @@ The JSON layout (version 1)::
                  "energy_gain": [...],
                  "unexplained_stop": [...], "unexplained_stop_body": [name | null],
                  "imparted_speed": [...], "imparted_speed_body": [name | null],
-                 "joint_error": [...], "joint_error_joint": [name | null]},   # (with joints)
+                 "joint_error": [...], "joint_error_joint": [name | null],    # (with joints)
+                 "attachment_drift": [...]},                                   # (with attachments)
      "cloths": {name: {"strain": [...], "self_intersections": [...],
-                       "vertex_penetration": [...], "edge_penetration": [...]}},
+                       "vertex_penetration": [...], "edge_penetration": [...],
+                       "attachment_drift": [...]}},                            # (attached cloths)
      "summary": {figure: {"worst": v, "frame": f, "threshold": t, "first_over": f | null}},
      "warnings": [...], "profile": {stage: seconds}}
 
@@ -68,6 +75,7 @@ from pathlib import Path
 from typing import Any
 
 from .files import sha256_of, write_atomically
+from .qa_attachments import AttachmentDrift, has_attachments
 from .qa_deforming import DeformingPenetration, has_deforming
 from .qa_motion import MotionFigures
 from .scene import Scene
@@ -76,6 +84,7 @@ QA_VERSION = 2
 BODY_PENETRATION = 5e-3       # (m)
 CLOTH_PENETRATION = 1e-3      # (m)
 JOINT_ERROR = 1e-3            # (m)
+ATTACHMENT_DRIFT = 1e-3       # (m)
 STRAIN_MARGIN = 0.01          # of the strain limit
 MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
 # World.statistics() counters of the cloth step's fallbacks (README "Bounded work"), summed
@@ -104,6 +113,7 @@ def thresholds(scene: Scene) -> dict[str, float | None]:
         "substeps": MAX_SUBSTEPS - 1 if scene.substeps == 0 else None,  # a fixed count is the scene's
         "cloth_fallbacks": 0 if scene.cloths else None,
         **({"joint_error": JOINT_ERROR} if scene.joints else {}),
+        **({"attachment_drift": ATTACHMENT_DRIFT} if has_attachments(scene) else {}),
         "kinetic_energy": None,
         "wall_seconds": None,
     }
@@ -124,7 +134,8 @@ class QualityRecorder:
             "substeps", "wall_seconds", "kinetic_energy", "body_penetration",
             "body_penetration_between", "cloth_penetration", "cloth_strain",
             "cloth_self_intersections", "cloth_fallbacks") + (_MOTION if motion is not None else ())
-            + (("joint_error", "joint_error_joint") if scene.joints else ())}
+            + (("joint_error", "joint_error_joint") if scene.joints else ())
+            + (("attachment_drift",) if has_attachments(scene) else ())}
         self.joint_names = [j.name for j in scene.joints]
         self._fallbacks = 0  # the fallbacks counted up to the last recorded frame
         self._meter = None   # the core's QualityMeter, made at the first frame
@@ -133,6 +144,11 @@ class QualityRecorder:
                    "edge_penetration": []} for name in self.cloth_names}
         # cloth inside a deforming collider at its own pose (simbake.qa_deforming)
         self.deforming = DeformingPenetration(scene) if has_deforming(scene) and scene.cloths else None
+        # attached cloth points against where their body carries them (simbake.qa_attachments)
+        self.attachments = AttachmentDrift(scene) if has_attachments(scene) else None
+        for c in scene.cloths:
+            if c.attached:
+                self.cloths[c.name]["attachment_drift"] = []
 
     @property
     def thresholds(self) -> dict[str, float | None]:
@@ -179,6 +195,11 @@ class QualityRecorder:
         f["cloth_self_intersections"].append(crossings)
         if self.joint_names:
             self._record_joints(world)
+        if self.attachments is not None:
+            drift = self.attachments.measure(frame, world)
+            for k, value in drift.items():
+                self.cloths[self.cloth_names[k]]["attachment_drift"].append(value)
+            f["attachment_drift"].append(max(drift.values()))
 
     def _record_joints(self, world) -> None:
         """The largest gap of any joint not broken, and which joint."""
@@ -251,6 +272,9 @@ class QualityRecorder:
             over(f"cloth {name!r} penetration", depth, CLOTH_PENETRATION, "mm", 1e3)
             over(f"cloth {name!r} strain", c["strain"], self.limits[name], "%", 1e2)
             over(f"cloth {name!r} self-intersections", c["self_intersections"], 0, "pairs", 1)
+            if "attachment_drift" in c:
+                over(f"cloth {name!r} attached points off their body", c["attachment_drift"], ATTACHMENT_DRIFT,
+                     "mm", 1e3)
             uncounted = [self.frames[k] for k, v in enumerate(c["self_intersections"]) if v < 0]
             if uncounted:
                 lines.append(f"QA: cloth {name!r} self-intersections not counted at {len(uncounted)} frame(s) "

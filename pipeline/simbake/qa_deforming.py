@@ -101,17 +101,12 @@ def triangle_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarra
     return best
 
 
-def deepest_distance(points: np.ndarray, corners: np.ndarray) -> float:
-    """The largest over the points (n, 3) of the distance to the nearest of the triangles
-    (m, 3, 3), exact. Each point's _NEAREST triangles by centroid first give an upper bound
-    of its distance, which is its distance when every other triangle is further: its centroid
-    is no nearer than the last of those, so the triangle no nearer than that less its radius.
-    The others are looked at against every triangle, deepest bound first, until a bound is
-    below the deepest distance found (a sphere's centre is equally far from all triangles)."""
+def _nearest_bounds(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's distance to the nearest of its _NEAREST triangles by centroid (an upper
+    bound of its distance to the mesh), and whether that is its distance: when the last of
+    those centroids is no nearer than the bound plus the largest triangle's radius."""
     from scipy.spatial import cKDTree
 
-    if len(points) == 0:
-        return 0.0
     centroids = corners.mean(axis=1)
     radius = float(np.linalg.norm(corners - centroids[:, None, :], axis=-1).max())
     k = min(_NEAREST, len(corners))
@@ -121,6 +116,39 @@ def deepest_distance(points: np.ndarray, corners: np.ndarray) -> float:
     bound = triangle_distances(np.repeat(points, k, axis=0), corners[flat, 0], corners[flat, 1],
                                corners[flat, 2]).reshape(len(points), k).min(axis=1)
     settled = far[:, -1] >= bound + radius if k < len(corners) else np.ones(len(points), dtype=bool)
+    return bound, settled
+
+
+def nearest_distances(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Each point's (n, 3) distance to the nearest of the triangles (m, 3, 3), exact: the
+    bound of _nearest_bounds, and for a point it does not settle every triangle whose centroid
+    is within the bound plus the largest triangle's radius (no other can be nearer)."""
+    from scipy.spatial import cKDTree
+
+    bound, settled = _nearest_bounds(points, corners)
+    open_ = np.flatnonzero(~settled)
+    if len(open_):
+        centroids = corners.mean(axis=1)
+        radius = float(np.linalg.norm(corners - centroids[:, None, :], axis=-1).max())
+        found = cKDTree(centroids).query_ball_point(points[open_], bound[open_] + radius)
+        counts = np.array([len(f) for f in found])
+        tri = np.concatenate([np.asarray(f, dtype=np.int64) for f in found])
+        d = triangle_distances(np.repeat(points[open_], counts, axis=0), corners[tri, 0], corners[tri, 1],
+                               corners[tri, 2])
+        bound[open_] = np.minimum(bound[open_], np.minimum.reduceat(d, np.cumsum(counts) - counts))
+    return bound
+
+
+def deepest_distance(points: np.ndarray, corners: np.ndarray) -> float:
+    """The largest over the points (n, 3) of the distance to the nearest of the triangles
+    (m, 3, 3), exact. Each point's _NEAREST triangles by centroid first give an upper bound
+    of its distance, which is its distance when every other triangle is further: its centroid
+    is no nearer than the last of those, so the triangle no nearer than that less its radius.
+    The others are looked at against every triangle, deepest bound first, until a bound is
+    below the deepest distance found (a sphere's centre is equally far from all triangles)."""
+    if len(points) == 0:
+        return 0.0
+    bound, settled = _nearest_bounds(points, corners)
     best = float(bound[settled].max()) if settled.any() else 0.0
     for i in np.flatnonzero(~settled)[np.argsort(-bound[~settled], kind="stable")]:
         if bound[i] <= best:

@@ -9,12 +9,13 @@ Y is up, quaternions are ``[w, x, y, z]`` and paths are relative to the scene fi
     [[bodies]]  name (required), mesh = "file.obj"  or  shape = { type = "sphere", radius = r }
                 | { type = "box", size = [x, y, z] }, density or mass, position, orientation,
                 linear_velocity, angular_velocity, friction, restitution, kinematic, voxel_size,
-                keys = [{ time, position, orientation }, ...] (kinematic bodies only)
+                keys = [{ time, position, orientation }, ...] (kinematic bodies only),
+                mesh_sequence = "frames/body.%04d.obj" (kinematic: a deforming body, a file a frame)
     [[cloths]]  name (required), grid = { size = [w, d], resolution = [nx, nz] } or mesh = "...",
                 position, orientation, area_density, stretch_stiffness, bend_stiffness,
                 damping, strain_limit, compression, friction, thickness, pinned,
                 model (springs | membrane), poisson_ratio, integrator (implicit | explicit),
-                self_collision (true | false)
+                self_collision (true | false), attach = { to = "BODY", points = [...] }
     [[joints]]  name (required), type (fixed | revolute | prismatic | spherical | distance | d6),
                 body0, body1 (body names; absent: the world), local_position0/1,
                 local_rotation0/1, axis (x | y | z), lower_limit, upper_limit, cone_angle0/1,
@@ -46,7 +47,7 @@ import math
 import os
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
@@ -126,6 +127,7 @@ class Deformation:
                                                        # row k is frame start_frame + k
     triangles: Any = field(compare=False, repr=False)  # (m, 3) int32, closed, wound outwards
     source: str = "points"                             # "points" (time-sampled) | "skel" (UsdSkel)
+                                                       # | "sequence" (a TOML body's mesh_sequence)
 
 
 @dataclass(frozen=True)
@@ -148,9 +150,12 @@ class Body:
     center_of_mass: Vec3 | None = None  # in the mesh's frame (m); None: the shape's centroid
     inertia: tuple[Vec3, Vec3, Vec3] | None = None  # about the centre of mass, mesh frame (kg m^2)
     prim_path: str = ""  # a USD shot's body: its prim, for messages
-    # a deforming collider (kinematic, at the origin, its shape the first frame's surface): the
-    # surface at every frame; None for a rigid body
+    # a deforming collider (kinematic, its shape the first frame's surface, its mesh in world
+    # coordinates): the surface at every frame; None for a rigid body
     deformation: Deformation | None = field(default=None, compare=False, repr=False)
+    # a TOML deforming body: its files' pattern (absolute, one %d field for the frame number),
+    # each frame's mesh placed by position and orientation (read_sequences)
+    mesh_sequence: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -176,6 +181,10 @@ class Cloth:
     poisson_ratio: float = 0.3      # membrane only
     integrator: str = "implicit"    # implicit (backward Euler) | explicit
     self_collision: bool = True     # kept from passing through itself (at `thickness`)
+    # points bound at the first frame to the nearest point of a body's surface and carried with
+    # it (core: contact/cloth_attachment.h): the body's name, and the vertex indices
+    attach_to: str = ""
+    attached: tuple[int, ...] = ()
     # a USD shot's cloth mesh, inline: (n, 3) float64 world rest positions (m), (m, 3) int32
     mesh_vertices: Any = field(default=None, compare=False, repr=False)
     mesh_triangles: Any = field(default=None, compare=False, repr=False)
@@ -279,7 +288,13 @@ class Scene:
         return (*layers, *self._mesh_paths())
 
     def _mesh_paths(self) -> tuple[Path, ...]:
-        paths = [b.shape.mesh_path for b in self.bodies] + [c.mesh_path for c in self.cloths]
+        from .mesh_files import sequence_frame_path
+
+        paths = [b.shape.mesh_path for b in self.bodies]
+        for b in self.bodies:
+            if b.mesh_sequence is not None:
+                paths += [sequence_frame_path(b.mesh_sequence, f) for f in range(self.start_frame, self.end_frame + 1)]
+        paths += [c.mesh_path for c in self.cloths]
         return tuple(dict.fromkeys(p for p in paths if p is not None))
 
 
@@ -305,7 +320,7 @@ _GROUND_KEYS = ("height", "friction", "restitution")
 _BODY_KEYS = (
     "name", "mesh", "shape", "density", "mass", "position", "orientation",
     "linear_velocity", "angular_velocity", "friction", "restitution", "kinematic",
-    "voxel_size", "keys",
+    "voxel_size", "keys", "mesh_sequence",
 )  # fmt: skip
 _KEY_KEYS = ("time", "position", "orientation")
 _SHAPE_KEYS = {"sphere": ("type", "radius"), "box": ("type", "size")}
@@ -313,9 +328,10 @@ _ANY_SHAPE_KEYS = ("type", "radius", "size")
 _CLOTH_KEYS = (
     "name", "grid", "mesh", "position", "orientation", "area_density",
     "stretch_stiffness", "bend_stiffness", "damping", "strain_limit", "compression",
-    "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator", "self_collision",
+    "friction", "thickness", "pinned", "model", "poisson_ratio", "integrator", "self_collision", "attach",
 )  # fmt: skip
 _GRID_KEYS = ("size", "resolution")
+_ATTACH_KEYS = ("to", "points")
 _JOINT_KEYS = ("name", "type", "body0", "body1", "local_position0", "local_rotation0", "local_position1",
                "local_rotation1", "axis", "lower_limit", "upper_limit", "cone_angle0", "cone_angle1",
                "min_distance", "max_distance", "limits", "drives", "break_force", "break_torque", "enabled",
@@ -330,11 +346,12 @@ TABLE_KEYS = {"scene": _SCENE_KEYS, "solver": _SOLVER_KEYS, "ground": _GROUND_KE
               "joints": _JOINT_KEYS}
 
 
-def load_toml_scene(path: str | os.PathLike[str]) -> Scene:
+def load_toml_scene(path: str | os.PathLike[str], frames: tuple | None = None) -> Scene:
     """Read and validate a TOML scene file; raise :class:`SceneError` on any problem.
+    `frames` (start, end; either may be None): another range than the file's (``--frames``).
     (simbake.load_scene takes a USD shot too: simbake.loading.)"""
     file = os.fspath(path)  # named in messages exactly as the user gave it
-    return scene_from_data(read_scene_data(file), file)
+    return scene_from_data(read_scene_data(file), file, frames)
 
 
 def frame_range(file: str, start_frame, end_frame) -> tuple | None:
@@ -371,9 +388,10 @@ def read_scene_data(path: str | os.PathLike[str]) -> dict[str, Any]:
     return _read_toml(file, _scene_path(file))
 
 
-def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene:
+def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str], frames: tuple | None = None) -> Scene:
     """Validate parsed TOML tables as the scene file at `path` would be (paths relative to it,
-    messages naming it): what load_toml_scene does after reading. A wedge edits the tables of a
+    messages naming it): what load_toml_scene does after reading, over the range `frames` when
+    given (a deforming body's files are those of the range). A wedge edits the tables of a
     scene file and validates each take's through here (simbake.wedge_takes)."""
     file = os.fspath(path)
     scene_path = _scene_path(file)
@@ -386,9 +404,12 @@ def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene
     solver = root.subtable("solver", _SOLVER_KEYS)
 
     bodies = tuple(_body(t, base_dir) for t in root.tables("bodies", _BODY_KEYS))
-    cloths = tuple(_cloth(t, base_dir) for t in root.tables("cloths", _CLOTH_KEYS))
+    cloth_tables = root.tables("cloths", _CLOTH_KEYS)
+    cloths = tuple(_cloth(t, base_dir) for t in cloth_tables)
     _check_unique_names(file, bodies, cloths)
     names = [b.name for b in bodies]
+    for t, cloth in zip(cloth_tables, cloths):
+        _check_attach_target(t, cloth, names)
     joints = tuple(_joint(t, names) for t in root.tables("joints", _JOINT_KEYS))
     _check_unique_joints(file, joints)
 
@@ -407,7 +428,31 @@ def scene_from_data(data: dict[str, Any], path: str | os.PathLike[str]) -> Scene
         filtered_pairs=_filtered_pairs(root, names),
     )
     check_scene(scene)  # the physical range and the budget of what the scene alone decides
-    return scene
+    if frames is not None and (frames[0], frames[1]) != (None, None):
+        start, end = stage_range(scene, frames)
+        scene = replace(scene, start_frame=start, end_frame=end)
+        check_scene(scene)
+    return read_sequences(scene)
+
+
+def read_sequences(scene: Scene) -> Scene:
+    """The scene with each ``mesh_sequence`` body's surface read at every frame of its range
+    (Body.deformation: the files' meshes placed by the body's position and orientation, one
+    topology) and its shape the first frame's, as a USD shot's deforming collider is read."""
+    if all(b.mesh_sequence is None for b in scene.bodies):
+        return scene
+    from .mesh_files import read_mesh_sequence
+
+    bodies = []
+    for i, b in enumerate(scene.bodies):
+        if b.mesh_sequence is not None:
+            vertices, triangles = read_mesh_sequence(b.mesh_sequence, range(scene.start_frame, scene.end_frame + 1),
+                                                     scene.source, f"bodies[{i}].mesh_sequence", b.position,
+                                                     b.orientation)
+            b = replace(b, shape=replace(b.shape, mesh_vertices=vertices[0], mesh_triangles=triangles),
+                        deformation=Deformation(vertices=vertices, triangles=triangles, source="sequence"))
+        bodies.append(b)
+    return replace(scene, bodies=tuple(bodies))
 
 
 def _read_toml(file: str, path: Path) -> dict[str, Any]:
@@ -451,6 +496,7 @@ def _body(t: _Table, base_dir: Path) -> Body:
     position = t.vector("position", 3, ZERO3)
     orientation = _orientation(t)
     kinematic = t.boolean("kinematic", Body.kinematic)
+    sequence = _mesh_sequence(t, base_dir, kinematic)
     return Body(
         name=name,
         shape=shape,
@@ -465,7 +511,28 @@ def _body(t: _Table, base_dir: Path) -> Body:
         kinematic=kinematic,
         voxel_size=t.number("voxel_size", Body.voxel_size, _at_least(0)),
         keys=_keys(t, kinematic, position, orientation),
+        mesh_sequence=sequence,
     )
+
+
+def _mesh_sequence(t: _Table, base_dir: Path, kinematic: bool) -> Path | None:
+    """``mesh_sequence = "frames/body.%04d.obj"``: a deforming body's files, one a frame (the
+    frame number in the printf field), relative to the scene file; kinematic, moved by its
+    frames alone (read_sequences reads them)."""
+    if not t.has("mesh_sequence"):
+        return None
+    from .mesh_files import sequence_pattern_problem
+
+    text = t.string("mesh_sequence", check=_non_empty)
+    problem = sequence_pattern_problem(text)
+    if problem:
+        raise t.error("mesh_sequence", problem)
+    if not kinematic:
+        raise t.error("mesh_sequence", "a deforming body is kinematic: add kinematic = true (its frames move it)")
+    for other in ("keys", "linear_velocity", "angular_velocity"):
+        if t.has(other):
+            raise t.error(other, "does not apply to a deforming body (mesh_sequence): its frames move it")
+    return Path(os.path.abspath(base_dir / text))
 
 
 def _keys(t: _Table, kinematic: bool, position: Vec3, orientation: Quat) -> tuple[Key, ...]:
@@ -490,10 +557,15 @@ def _keys(t: _Table, kinematic: bool, position: Vec3, orientation: Quat) -> tupl
 def _body_shape(t: _Table, base_dir: Path) -> Shape:
     if t.has("mesh") and t.has("shape"):
         raise t.error("shape", "cannot be given together with mesh; give one of them")
+    if t.has("mesh_sequence"):
+        for other in ("mesh", "shape"):
+            if t.has(other):
+                raise t.error(other, "cannot be given together with mesh_sequence; give one of them")
+        return Shape(kind="mesh", mesh_source=t.string("mesh_sequence"))
     if t.has("mesh"):
         return Shape(kind="mesh", mesh_path=_mesh_file(t, "mesh", base_dir))
     if not t.has("shape"):
-        raise t.error(None, 'needs either mesh = "FILE" or shape = { type = ... }')
+        raise t.error(None, 'needs either mesh = "FILE", shape = { type = ... } or mesh_sequence = "FILES.%04d.obj"')
     shape = t.subtable("shape", _ANY_SHAPE_KEYS)
     kind = shape.string("type", check=_one_of(SHAPE_TYPES))
     shape.only(_SHAPE_KEYS[kind], f"a {kind} shape")
@@ -515,6 +587,8 @@ def _cloth(t: _Table, base_dir: Path) -> Cloth:
         grid_resolution = grid.integers("resolution", 2, check=_at_least(2))
     else:
         mesh_path = _mesh_file(t, "mesh", base_dir)
+    pinned = t.integers("pinned", None, Cloth.pinned, _vertex_index(grid_resolution))
+    attach_to, attached = _attach(t, grid_resolution, pinned)
     return Cloth(
         name=name,
         grid_size=grid_size,
@@ -530,12 +604,42 @@ def _cloth(t: _Table, base_dir: Path) -> Cloth:
         compression=t.string("compression", Cloth.compression, _one_of(COMPRESSION_MODES)),
         friction=t.number("friction", Cloth.friction, _at_least(0)),
         thickness=t.number("thickness", Cloth.thickness, _at_least(0)),
-        pinned=t.integers("pinned", None, Cloth.pinned, _vertex_index(grid_resolution)),
+        pinned=pinned,
         model=t.string("model", Cloth.model, _one_of(CLOTH_MODELS)),
         poisson_ratio=t.number("poisson_ratio", Cloth.poisson_ratio, _poisson),
         integrator=t.string("integrator", Cloth.integrator, _one_of(CLOTH_INTEGRATORS)),
         self_collision=t.boolean("self_collision", Cloth.self_collision),
+        attach_to=attach_to,
+        attached=attached,
     )
+
+
+def _attach(t: _Table, resolution: tuple[int, int] | None, pinned: tuple[int, ...]) -> tuple[str, tuple[int, ...]]:
+    """``attach = { to = "BODY", points = [...] }``: the body (checked once the bodies are
+    known: _check_attach_target) and the vertices, each once, none of them pinned."""
+    if not t.has("attach"):
+        return "", ()
+    a = t.subtable("attach", _ATTACH_KEYS)
+    to = a.string("to", check=_non_empty)
+    points = a.integers("points", None, check=_vertex_index(resolution))
+    if not points:
+        raise a.error("points", "must list at least one vertex index")
+    first: dict[int, int] = {}
+    for k, p in enumerate(points):
+        if p in first:
+            raise a.error(f"points[{k}]", f"vertex {p} is listed twice (also points[{first[p]}])")
+        first[p] = k
+        if p in pinned:
+            raise a.error(f"points[{k}]", f"vertex {p} is also pinned (pinned[{pinned.index(p)}]); "
+                                          "a point is either pinned or attached")
+    return to, points
+
+
+def _check_attach_target(t: _Table, cloth: Cloth, bodies: list[str]) -> None:
+    if cloth.attach_to and cloth.attach_to not in bodies:
+        listed = ", ".join(_short(b) for b in bodies[:8]) + (", ..." if len(bodies) > 8 else "")
+        raise t.error("attach.to", f"no body named {_short(cloth.attach_to)!r}"
+                                   + (f" (bodies: {listed})" if bodies else " (the scene has no bodies)"))
 
 
 def _poisson(value: float) -> str | None:

@@ -69,10 +69,13 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
         # a mesh body's level set comes with its mesh: its sharp edges are held out of cloth
         mesh = ({"mesh_vertices": asset.vertices, "mesh_triangles": asset.triangles}
                 if body.shape.kind == "mesh" and asset.level_set is not None else {})
+        # (a deforming body's mesh is in world coordinates: its pose is the identity)
+        origin, orientation = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)) if body.deformation is not None \
+            else (body.position, body.orientation)
         try:
             world.add_body(shape=asset.level_set, samples=asset.samples,
                            mass_properties=_mass_properties(body, asset, mass), mass=mass,
-                           origin=np.array(body.position), orientation=np.array(body.orientation),
+                           origin=np.array(origin), orientation=np.array(orientation),
                            linear_velocity=np.array(body.linear_velocity),
                            angular_velocity=np.array(body.angular_velocity), friction=body.friction,
                            restitution=body.restitution, kinematic=body.kinematic, **mesh)
@@ -88,14 +91,27 @@ def build_world(scene: Scene, assets: list[BodyAsset], cloths: list[ClothAsset] 
                             model=cloth.model, stretch_stiffness=cloth.stretch_stiffness,
                             poisson_ratio=cloth.poisson_ratio, bend_stiffness=cloth.bend_stiffness,
                             damping=cloth.damping, strain_limit=cloth.strain_limit,
-                            compression=cloth.compression, pinned=list(cloth.pinned),
+                            compression=cloth.compression, pinned=list(cloth.pinned), attached=list(cloth.attached),
                             integrator=cloth.integrator, friction=cloth.friction, thickness=cloth.thickness,
                             self_collision=cloth.self_collision)
         except ValueError as error:
             raise SceneError(scene.source, scene.source_key(f"cloths[{index}]"), str(error)) from None
     _add_joints(world, scene)
     set_deforming_frames(scene, world, assets, scene.start_frame)
+    _attach_cloths(world, scene)
     return world
+
+
+def _attach_cloths(world, scene: Scene) -> None:
+    """Each cloth's attached points bound to their body where they are at the start frame
+    (a deforming body's surface already set there)."""
+    index = {b.name: i for i, b in enumerate(scene.bodies)}
+    for k, cloth in enumerate(scene.cloths):
+        if cloth.attached:
+            try:
+                world.attach_cloth(k, index[cloth.attach_to])
+            except ValueError as error:
+                raise SceneError(scene.source, scene.source_key(f"cloths[{k}].attach.to"), str(error)) from None
 
 
 def set_deforming_frames(scene: Scene, world, assets: list[BodyAsset], frame: int) -> None:
@@ -355,6 +371,15 @@ def deforming_level_set_files(scene: Scene, body, asset: BodyAsset, tmp: Path, f
     return tuple(paths)
 
 
+def _body_prim_files(scene: Scene, body, level_set) -> dict:
+    """A body prim's level set (a file, or a deforming body's file a frame) and a deforming
+    body's points at every frame (usd_writer.BodyPrim)."""
+    if body.deformation is None:
+        return {"level_set": str(level_set or "")}
+    return {"frames": body.deformation.vertices, "first_frame": scene.start_frame,
+            "level_sets": tuple(str(p) for p in level_set or ())}
+
+
 def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = "auto",
                   clips: int | None = None, level_sets: dict | None = None, outputs: Outputs | None = None):
     """The writer of the scene's cache: a standalone stage (version 1) for a TOML scene, a
@@ -377,8 +402,7 @@ def _cache_writer(scene: Scene, output: Path, assets, cloths, instancing: str = 
                  face_vertex_indices=asset.triangles.reshape(-1),
                  normals=normals(asset.vertices, asset.triangles),  # hard edges hard
                  interpolation="faceVarying",
-                 level_set=str(level_sets.get(index, "")),
-                 dynamic=_moves(body))
+                 dynamic=_moves(body), **_body_prim_files(scene, body, level_sets.get(index)))
         for index, (body, asset) in enumerate(zip(scene.bodies, assets))
     ]
     cloth_prims = [ClothPrim(name=cloth.name, face_vertex_counts=np.full(len(asset.triangles), 3, dtype=np.int32),

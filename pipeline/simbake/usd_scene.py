@@ -400,7 +400,7 @@ class _Reader:
             else:
                 bodies.append(self._static_body(p, d, used_names, len(bodies)))
 
-        cloths, shot_cloths = self._cloths(used_names)
+        cloths, shot_cloths = self._cloths(used_names, bodies)
         joints = read_joints(self, descs, bodies)
         filtered_pairs, collision_groups, group_filters = read_filtering(descs, bodies, self.stage)
         self._named_warnings()
@@ -800,6 +800,8 @@ class _Reader:
         key = f"cloths[{index}]"
         self.keys += [(key, str(path)), (f"{key}.position", f"{path}.points")]
         self.keys += [(f"{key}.{name}", f"{path}.simbake:cloth:{_camel(name)}") for name in _CLOTH_KEYS]
+        self.keys += [(f"{key}.attach.to", f"{path}.simbake:cloth:attachTo"),
+                      (f"{key}.attach.points", f"{path}.simbake:cloth:attached")]
 
     def _rigid_body(self, path: str, d, shapes, used: set[str], index: int):
         from pxr import Usd, UsdGeom, UsdPhysics
@@ -1102,7 +1104,7 @@ class _Reader:
 
     # -- cloth --------------------------------------------------------------------------------
 
-    def _cloths(self, used: set[str]):
+    def _cloths(self, used: set[str], bodies: list[Body]):
         from pxr import Usd, UsdGeom, UsdPhysics
 
         cloths, targets = [], []
@@ -1124,6 +1126,7 @@ class _Reader:
             bad = [i for i in pinned if not 0 <= i < len(vertices)]
             if bad:
                 raise self.error(path, "simbake:cloth:pinned", f"point {bad[0]} does not exist (the mesh has {len(vertices)})")
+            attach_to, attached = self._attachment(prim, a, bodies, pinned, len(vertices))
             cloth = Cloth(
                 name=self._name(str(path), used), grid_size=None, grid_resolution=None, mesh_path=None,
                 position=(0.0, 0.0, 0.0), orientation=(1.0, 0.0, 0.0, 0.0),
@@ -1140,6 +1143,7 @@ class _Reader:
                 poisson_ratio=a.number("poissonRatio", Cloth.poisson_ratio, 1.0, below=0.5),
                 integrator=a.token("integrator", Cloth.integrator, CLOTH_INTEGRATORS),
                 self_collision=a.boolean("selfCollision", Cloth.self_collision),
+                attach_to=attach_to, attached=tuple(attached),
                 mesh_vertices=_frozen(vertices), mesh_triangles=_frozen(faces), prim_path=str(path))
             if UsdGeom.Xformable(prim).TransformMightBeTimeVarying():
                 self.warn(path, "the cloth's transform is animated; its rest shape and cache use the start time code's")
@@ -1147,6 +1151,52 @@ class _Reader:
                                      world_to_local=tuple(_vec(row) for row in np.linalg.inv(world))))
             cloths.append(cloth)
         return cloths, targets
+
+    def _attachment(self, prim, a: _ClothAttributes, bodies: list[Body], pinned: list[int],
+                    count: int) -> tuple[str, list[int]]:
+        """simbake:cloth:attachTo (one target: a body's prim, a collider inside a rigid body, or a
+        prim holding one body, such as a SkelRoot over its skinned collider) and
+        simbake:cloth:attached (point indices, each once, none pinned): the body's name and the points."""
+        path = prim.GetPath()
+        rel = prim.GetRelationship("simbake:cloth:attachTo")
+        targets = [str(t) for t in rel.GetTargets()] if rel else []
+        attached = a.ints("attached")
+        if not targets and not attached:
+            return "", []
+        if len(targets) != 1:
+            raise self.error(path, "simbake:cloth:attachTo", f"must target one prim, the body the attached points "
+                                                            f"ride; it targets {len(targets)}")
+        if not attached:
+            raise self.error(path, "simbake:cloth:attached", "lists no point: give the indices of the points "
+                                                            "attachTo carries")
+        first: dict[int, int] = {}
+        for k, i in enumerate(attached):
+            if not 0 <= i < count:
+                raise self.error(path, "simbake:cloth:attached", f"point {i} does not exist (the mesh has {count})")
+            if i in first:
+                raise self.error(path, "simbake:cloth:attached", f"point {i} is listed twice (at {first[i]} and {k})")
+            if i in pinned:
+                raise self.error(path, "simbake:cloth:attached", f"point {i} is also in simbake:cloth:pinned; a point "
+                                                                "is either pinned or attached")
+            first[i] = k
+        return self._attach_target(path, targets[0], bodies), attached
+
+    def _attach_target(self, path, target: str, bodies: list[Body]) -> str:
+        """The body an attachTo target names: its own prim, the nearest body above it (a collider of
+        a rigid body), or the one body below it."""
+        bodies = [b for b in bodies if b.prim_path]
+        owners = [b for b in bodies if b.prim_path == target or target.startswith(b.prim_path + "/")]
+        if owners:
+            return max(owners, key=lambda b: len(b.prim_path)).name
+        below = [b for b in bodies if b.prim_path.startswith(target.rstrip("/") + "/")]
+        if len(below) == 1:
+            return below[0].name
+        if below:
+            listed = ", ".join(sorted(b.prim_path for b in below)[:4])
+            raise self.error(path, "simbake:cloth:attachTo", f"<{target}> holds {len(below)} bodies ({listed}"
+                                                            f"{', ...' if len(below) > 4 else ''}); target one of them")
+        raise self.error(path, "simbake:cloth:attachTo", f"<{target}> is not a simulated body: target a rigid body, "
+                                                        "or a collider (static, time-sampled or skinned by UsdSkel)")
 
 
 # physics:approximation of a mesh collider (UsdPhysics.MeshCollisionAPI), as simbake reads it:

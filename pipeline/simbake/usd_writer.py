@@ -57,7 +57,7 @@ import os
 import uuid
 import weakref
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -135,6 +135,12 @@ class BodyPrim:
     dynamic: bool
     interpolation: str = ""  # of the normals: "vertex" | "faceVarying"; "" = by their count
     level_set: str = ""  # the .vdb the solver used (absolute path), shown as a guide Volume
+    # a deforming body (its pose the identity): its points at every frame from `first_frame`
+    # (frames, n, 3), written as time samples (no normals: they change), and its level sets,
+    # a .vdb a frame (absolute paths, from first_frame), the guide Volume's time-sampled filePath
+    frames: Any = field(default=None, compare=False, repr=False)
+    first_frame: int = 0
+    level_sets: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         _check_name("body", self.name)
@@ -151,10 +157,16 @@ class BodyPrim:
         if idx.size and idx.max() >= pts.shape[0]:
             raise ValueError(f"body {self.name!r}: face vertex index {int(idx.max())} "
                              f"out of range for {pts.shape[0]} points")
-        for field, value in (("points", pts), ("normals", nrm)):
+        for name, value in (("points", pts), ("normals", nrm)):
             value = np.ascontiguousarray(value, dtype=np.float32)
             value.setflags(write=False)
-            object.__setattr__(self, field, value)
+            object.__setattr__(self, name, value)
+        if self.frames is not None:
+            frames = np.ascontiguousarray(self.frames, dtype=np.float32)
+            if frames.ndim != 3 or frames.shape[1:] != pts.shape:
+                raise ValueError(f"body {self.name!r}: frames must be (frames, {pts.shape[0]}, 3), got {frames.shape}")
+            frames.setflags(write=False)
+            object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "face_vertex_counts", counts)
         object.__setattr__(self, "face_vertex_indices", idx)
         object.__setattr__(self, "dynamic", bool(self.dynamic))
@@ -423,6 +435,7 @@ class CacheWriter(StreamingWriter):
         self._translate_paths: list[Sdf.Path] = []
         self._orient_paths: list[Sdf.Path] = []
         self._cloth_paths: list[tuple[Sdf.Path, Sdf.Path, Sdf.Path, Sdf.Path]] = []
+        self._deforming: list[tuple[int, Sdf.Path, Sdf.Path]] = []  # (body, points, extent)
         with Sdf.ChangeBlock():
             world = self._def(Sdf.Path.absoluteRootPath, "World", "Xform")
             world.kind = "component"  # the cache is one referenceable asset (a leaf model)
@@ -439,12 +452,17 @@ class CacheWriter(StreamingWriter):
                 self._orient_paths.append(o.path)
                 mesh = self._def(xf.path, body_mesh_name(body.name), "Mesh")
                 self._mesh_topology(mesh, body.face_vertex_counts, body.face_vertex_indices)
-                self._attr(mesh, "points", _TN.Point3fArray, Vt.Vec3fArray.FromNumpy(body.points))
-                n = self._attr(mesh, "normals", _TN.Normal3fArray,
-                               Vt.Vec3fArray.FromNumpy(body.normals))
-                n.SetInfo("interpolation", body.normals_interpolation)
-                self._attr(mesh, "extent", _TN.Float3Array, _extent(body.points))
-                if body.level_set:
+                if body.frames is not None:  # sampled every frame (write_frame)
+                    p = self._attr(mesh, "points", _TN.Point3fArray)
+                    e = self._attr(mesh, "extent", _TN.Float3Array)
+                    self._deforming.append((index, p.path, e.path))
+                else:
+                    self._attr(mesh, "points", _TN.Point3fArray, Vt.Vec3fArray.FromNumpy(body.points))
+                    n = self._attr(mesh, "normals", _TN.Normal3fArray,
+                                   Vt.Vec3fArray.FromNumpy(body.normals))
+                    n.SetInfo("interpolation", body.normals_interpolation)
+                    self._attr(mesh, "extent", _TN.Float3Array, _extent(body.points))
+                if body.level_set or body.level_sets:
                     self._level_set_volume(xf, body)
             for cloth in self.cloths:
                 mesh = self._def(world.path, cloth.name, "Mesh")
@@ -462,9 +480,11 @@ class CacheWriter(StreamingWriter):
         self._dynamic = [(i, self._translate_paths[i], self._orient_paths[i])
                          for i, b in enumerate(self.bodies) if b.dynamic and i not in self._instanced]
         self._static = [i for i, b in enumerate(self.bodies) if not b.dynamic and i not in self._instanced]
-        self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths) + self._instancers.sampled_count
+        self._n_sampled = 2 * len(self._dynamic) + 4 * len(self.cloths) + self._instancers.sampled_count \
+            + 2 * len(self._deforming)
         # filled in for cloths on the first frame
-        self._frame_bytes = 56 * len(self._dynamic) + self._instancers.frame_bytes()
+        self._frame_bytes = 56 * len(self._dynamic) + self._instancers.frame_bytes() \
+            + sum(12 * len(self.bodies[i].points) + 24 for i, _, _ in self._deforming)
 
     def _level_set_volume(self, xf: Sdf.PrimSpec, body: BodyPrim) -> None:
         """levelset: a guide Volume whose OpenVDBAsset field is the body's .vdb (grid "surface"),
@@ -472,14 +492,20 @@ class CacheWriter(StreamingWriter):
         volume = self._def(xf.path, "levelset", "Volume")
         self._attr(volume, "purpose", _TN.Token, "guide", uniform=True)
         field = self._def(volume.path, "surface", "OpenVDBAsset")
-        relative = os.path.relpath(body.level_set, self.path.parent.absolute())
-        self._attr(field, "filePath", _TN.Asset, Sdf.AssetPath(relative if relative.startswith("..")
-                                                                 else f"./{relative}"))
+        file_path = self._attr(field, "filePath", _TN.Asset, self._relative_asset(body.level_set or body.level_sets[0]))
+        for frame in range(self.start_frame, self.end_frame + 1) if body.level_sets else ():  # one a frame
+            self._layer.SetTimeSample(file_path.path, float(frame),
+                                      self._relative_asset(body.level_sets[frame - body.first_frame]))
         self._attr(field, "fieldName", _TN.Token, "surface")
         rel = Sdf.RelationshipSpec(volume, "field:surface", custom=False)
         rel.targetPathList.explicitItems = [field.path]
-        points = body.points.astype(np.float64)  # the grid's narrow band hugs the surface
-        self._attr(volume, "extent", _TN.Float3Array, _extent(points.astype(np.float32)))
+        # (the grid's narrow band hugs the surface, over every frame of a deforming one)
+        points = body.points if body.frames is None else body.frames.reshape(-1, 3)
+        self._attr(volume, "extent", _TN.Float3Array, _extent(points))
+
+    def _relative_asset(self, path: str) -> Sdf.AssetPath:
+        relative = os.path.relpath(path, self.path.parent.absolute())
+        return Sdf.AssetPath(relative if relative.startswith("..") else f"./{relative}")
 
     def _def(self, parent: Sdf.Path, name: str, type_name: str) -> Sdf.PrimSpec:
         spec = Sdf.CreatePrimInLayer(self._layer, parent.AppendChild(name))
@@ -578,6 +604,11 @@ class CacheWriter(StreamingWriter):
                         Quatd(q[0], q[1], q[2], q[3])
             if self.instancer_groups:
                 self._instancers.write(layer, time, tr, qs, bv, bw)
+            for i, p_path, e_path in self._deforming:
+                body = self.bodies[i]
+                pts = body.frames[frame - body.first_frame]
+                set_sample(p_path, time, from_numpy(pts))
+                set_sample(e_path, time, _extent(pts))
             for paths, (pts, nrm, vel) in zip(self._cloth_paths, cloth_data):
                 p_path, n_path, v_path, e_path = paths
                 set_sample(p_path, time, from_numpy(pts))

@@ -30,6 +30,20 @@ inline BodyDesc box_body(const Vec3& size, double mass, const Vec3& origin, int 
   return d;
 }
 
+// A kinematic body to deform (World::set_deforming_frame): a sphere mesh's `vertices` (world
+// coordinates, its mesh pose the identity) and `triangles`, the level set of a sphere of
+// `radius` at the origin
+inline BodyDesc deforming_sphere_body(const Points& vertices, const Triangles& triangles, double radius) {
+  BodyDesc d;
+  d.shape = std::make_shared<SphereDistance>(radius);
+  d.samples = vertices;
+  d.mesh_vertices = vertices;
+  d.mesh_triangles = triangles;
+  d.unit_mass = sphere_mass_properties(radius);
+  d.kinematic = true;
+  return d;
+}
+
 inline double degrees(double radians) { return radians * 180.0 / M_PI; }
 
 // A cloth's description with its contact settings: friction against bodies and the ground,

@@ -43,6 +43,18 @@ def module_from_file(path: Path):
     return module
 
 
+def bake_error(scene: Path, out: Path, capsys) -> str:
+    """`simbake bake scene -o out -q` refused as bad input: exit 2, nothing written, and its
+    message, which must be one line (returned stripped, for the caller to check its text)."""
+    from simbake.cli import main
+
+    assert main(["bake", str(scene), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err, err
+    assert not out.exists()
+    return err
+
+
 @pytest.fixture(autouse=True)
 def simbake_cache_dir(tmp_path_factory, monkeypatch) -> Path:
     """A private, initially absent level-set cache for each test (subprocesses inherit it)."""

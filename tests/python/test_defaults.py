@@ -31,6 +31,7 @@ CLOTH_SCHEMA_NAMES = {
     "friction": "friction",
     "thickness": "thickness",
     "pinned": "pinned",
+    "attached": "attached",
     "model": "model",
     "poisson_ratio": "poissonRatio",
     "integrator": "integrator",

@@ -463,6 +463,72 @@ def test_shot_stage_shows_every_body_on_its_plane_ground(tmp_path):
             preview.close()
 
 
+def test_skinned_mesh_is_drawn_at_each_frames_pose(tmp_path):
+    # a box Mesh bound with weight 1 to a one-joint Skeleton whose SkelAnimation carries it
+    # 1.5 m along x and 0.3 m up between frames 1 and 3, under a SkelRoot moved 0.2 m along z;
+    # where the box should be is worked out here from the animation (the joint's translation
+    # and the root's), not by UsdSkel: at frame 3 the box's colour shows there and not at its
+    # rest place; the automatic camera frames the posed box, not the rest one
+    from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt
+
+    from simbake.preview import Preview, _color
+
+    path = write_stage(tmp_path / "skinned.usda")
+    stage = Usd.Stage.Open(str(path))
+    for prim in ("/World/box", "/World/sheet"):
+        stage.RemovePrim(prim)
+    root = UsdSkel.Root.Define(stage, "/World/Figure")
+    root.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 0.2))
+    skeleton = UsdSkel.Skeleton.Define(stage, "/World/Figure/Skel")
+    skeleton.CreateJointsAttr(Vt.TokenArray(["root"]))
+    rest = Gf.Matrix4d(1.0).SetTranslate(Gf.Vec3d(*BOX_CENTER))
+    skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray([rest]))
+    skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray([rest]))
+    anim = UsdSkel.Animation.Define(stage, "/World/Figure/Skel/Anim")
+    anim.CreateJointsAttr(Vt.TokenArray(["root"]))
+    anim.CreateRotationsAttr(Vt.QuatfArray([Gf.Quatf(1.0)]))
+    anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1.0, 1.0, 1.0)]))
+    moved = {f: BOX_CENTER + np.array([0.75, 0.15, 0.0]) * (f - 1) for f in (1, 2, 3)}
+    for f, at in moved.items():
+        anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*at)]), f)
+    UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    h = BOX_SIZE / 2
+    corners = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Figure/Body")
+    mesh.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*(np.array(c) + BOX_CENTER)) for c in corners]))
+    mesh.CreateFaceVertexCountsAttr([4] * 6)
+    mesh.CreateFaceVertexIndicesAttr([i for q in quads for i in q])
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skeleton.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
+    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
+    stage.GetRootLayer().Save()
+
+    base = np.array(_color("/World/Figure/Body"))
+
+    def is_box(pixel):
+        pixel = pixel.astype(float)
+        return pixel @ base / (np.linalg.norm(pixel) * np.linalg.norm(base)) > 0.998 and not is_grey(pixel)
+
+    offset = np.array([0.0, 0.0, 0.2])
+    for frame in (1, 3):
+        image = render(path, frames=str(frame))
+        front = moved[frame] + offset + [0.0, 0.0, h]       # the front face's centre at this frame
+        assert is_box(image[project(front)[::-1]]), (frame, image[project(front)[::-1]])
+        if frame == 3:
+            rest = moved[1] + offset + [0.0, 0.0, h]
+            assert not is_box(image[project(rest)[::-1]]), image[project(rest)[::-1]]
+    preview = Preview(path, (W, H))
+    try:
+        lo, hi, _, _ = preview.frame_range([3])
+    finally:
+        preview.close()
+    np.testing.assert_allclose(lo[[0, 2]], (moved[3] + offset - h)[[0, 2]], atol=1e-5)  # (y: the ground's)
+    np.testing.assert_allclose(hi, moved[3] + offset + h, atol=1e-5)
+
+
 @pytest.mark.parametrize("kind", ["Cube", "Sphere", "Capsule", "Cylinder", "Cone", "Plane"])
 @pytest.mark.parametrize("axis", ["X", "Y", "Z"])
 def test_gprim_tessellation_fills_its_extent_facing_out(kind, axis):

@@ -211,6 +211,29 @@ TEST(ClothWorld, AKeyedBodyNearTheClothMovesAtMostHalfAnEdgeAStep) {
   }
 }
 
+// A deforming collider near a cloth moves no vertex more than the cloth's thickness in a cloth
+// step (world/schedule.cpp): a 0.3 m sphere mesh whose vertices all move 0.1 m over a 1/24 s
+// frame under a sheet 5 mm thick lying 3 mm over its top asks for 0.1 / 0.005 = 20 cloth
+// steps; the same motion far from the cloth, or a surface held still under it, leaves the
+// cloth's own 5
+TEST(ClothWorld, ADeformingColliderNearTheClothMovesAtMostItsThicknessAStep) {
+  const double frame = 1.0 / 24.0, thickness = 0.005;
+  const TriangleMesh unit = make_sphere_mesh(1.0, 4);
+  for (const double away : {0.0, 20.0}) {
+    for (const double moves : {0.1, 0.0}) {
+      World world;
+      const Points start = (0.3 * unit.vertices).rowwise() + Vec3(0.0, away, 0.0).transpose();
+      const int b = world.add_body(test::deforming_sphere_body(start, unit.triangles, 0.3));
+      world.set_deforming_frame(b, start, std::make_shared<SphereDistance>(0.3), frame);
+      world.add_cloth(test::with_contacts(square_cloth(1.0, 9, Vec3(0.0, 0.303, 0.0)), 0.4, thickness));
+      const Points end = start.rowwise() + Vec3(moves, 0.0, 0.0).transpose();
+      world.set_deforming_frame(b, end, std::make_shared<SphereDistance>(0.3), frame);
+      const int expected = away == 0.0 && moves > 0.0 ? 20 : 5;
+      EXPECT_EQ(world.automatic_cloth_steps(frame), expected) << away << " " << moves;
+    }
+  }
+}
+
 // A heavy box set down on a cloth lying on the ground: the cloth pinched between them holds
 // the box up as a spacer of 3 thicknesses (contact/cloth_body_contact.cpp: hold_pinched_bodies), instead of the
 // box sinking through the cloth onto the ground; the cloth stays out of both

@@ -11,9 +11,26 @@
   linear blend skinning; the same sheet and ground.
 * ``rising_floor.usda``: a flat closed slab (a box ``Mesh`` with time-sampled points) whose
   top rises slowly (``RISE`` m/s), and a rigid ball resting on it.
+* ``caped_sphere.usda`` and ``caped_skinned_sphere.usda``: the swaying sphere (swelling by
+  ``CAPE["dr"]`` only, within the cape's strain limit) with time-sampled points, or skinned, and
+  a cape (a mesh cloth) sewn to it: its top row on an arc over the sphere's top, the cloth's
+  thickness off its surface (``simbake:cloth:attachTo`` the sphere, ``simbake:cloth:attached``
+  that row), the rest laid out behind it, to fall and hang down the sphere's back.
+
+* ``sleeve.usda``: an arm, a closed cylinder ``Mesh`` (radius ``ARM["radius"]``, capped) along
+  +x with ``PhysicsCollisionAPI``, skinned by UsdSkel to two joints: the shoulder (the root,
+  still) and the elbow (``ARM["elbow"]`` along the arm, its hinge on the inner side of the arm,
+  at -z), which bends the forearm 90 degrees about +y (towards -z) between frames ``BEND``,
+  eased, and holds. The points' weights blend the two joints over ``ARM["blend"]`` either side
+  of the elbow (a smoothstep). A sleeve (a tube ``Mesh`` cloth) around it: its first ring, at
+  the shoulder end, is sewn to the arm (the cloth's thickness off it); it widens to
+  ``SLEEVE["radius"]`` within ``SLEEVE["taper"]`` and runs loose to ``SLEEVE["length"]`` along
+  the arm, past the elbow. No ground: the sleeve hangs on the arm.
 
 Both spheres' surfaces are known in closed form at every frame (``sphere_at``), which is what
-the tests measure the cloth against. Run it from anywhere: ``python make_deforming.py``.
+the tests measure the cloth against; ``arm_at`` gives the arm's surface at a frame as UsdSkel
+skins it (linear blending, written out here with numpy). Run it from anywhere:
+``python make_deforming.py``.
 """
 
 from __future__ import annotations
@@ -33,14 +50,23 @@ LAT, LON = 16, 32                           # the sphere's rings and segments
 SHEET = dict(size=1.2, resolution=25, height=0.95, area_density=0.2, stretch_stiffness=500.0,
              bend_stiffness=2e-4, thickness=0.005)
 SLAB = dict(size=(1.2, 0.2, 1.2), top=0.1, ball_radius=0.1)
+# the cape: `columns` along an arc of +-`arc` degrees over the sphere's top (radius R + thickness
+# at the start), `rows` laid out behind it over `length` (m); the sphere swells by `dr` (m)
+CAPE = dict(arc=50.0, columns=17, rows=13, length=0.6, dr=0.02, area_density=0.2, stretch_stiffness=500.0,
+            bend_stiffness=2e-4, thickness=0.005)
 RISE = 0.1                                  # (m/s) the slab's top rises this fast
+BEND = (5, 45)                        # the elbow bends between these frames, 0 to 90 degrees
+ARM_Y = 1.0                           # (m) the arm's axis height
+ARM = dict(start=-0.1, end=0.65, radius=0.05, elbow=0.3, blend=0.05, rings=31, segments=16)
+SLEEVE = dict(length=0.55, radius=0.075, taper=0.08, rings=23, segments=16, area_density=0.15,
+              stretch_stiffness=500.0, bend_stiffness=1e-4, thickness=0.005)
 
 
-def sphere_at(frame: float) -> tuple[np.ndarray, float]:
-    """The sphere's centre (m) and radius (m) at a (fractional) frame."""
+def sphere_at(frame: float, dr: float | None = None) -> tuple[np.ndarray, float]:
+    """The sphere's centre (m) and radius (m) at a (fractional) frame, swelling by `dr` (DR)."""
     t = (frame - START) / FPS
     s = math.sin(OMEGA * t)
-    return np.array([SWAY * s, Y0, 0.0]), R + DR * s
+    return np.array([SWAY * s, Y0, 0.0]), R + (DR if dr is None else dr) * s
 
 
 def unit_sphere() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -80,7 +106,7 @@ def unit_sphere_triangles() -> np.ndarray:
                      for s, c in zip(starts, counts) for k in range(1, c - 1)])
 
 
-def _stage(path: Path) -> Usd.Stage:
+def _stage(path: Path, ground: bool = True) -> Usd.Stage:
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, "Y")
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -91,9 +117,10 @@ def _stage(path: Path) -> Usd.Stage:
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
     UsdPhysics.Scene.Define(stage, "/World/physicsScene")
-    ground = UsdGeom.Plane.Define(stage, "/World/ground")
-    ground.CreateAxisAttr("Y")
-    UsdPhysics.CollisionAPI.Apply(ground.GetPrim())
+    if ground:
+        plane = UsdGeom.Plane.Define(stage, "/World/ground")
+        plane.CreateAxisAttr("Y")
+        UsdPhysics.CollisionAPI.Apply(plane.GetPrim())
     return stage
 
 
@@ -113,30 +140,64 @@ def _sheet(stage) -> None:
                        (j / (n - 1) - 0.5) * size], axis=-1).reshape(-1, 3)
     p00 = (j[:-1, :-1] * n + i[:-1, :-1]).ravel()
     tris = np.concatenate([np.stack([p00, p00 + n, p00 + n + 1], -1), np.stack([p00, p00 + n + 1, p00 + 1], -1)])
-    sheet = _mesh(stage, "/World/Sheet", points, [3] * len(tris), tris.reshape(-1))
-    prim = sheet.GetPrim()
+    _cloth(_mesh(stage, "/World/Sheet", points, [3] * len(tris), tris.reshape(-1)), SHEET)
+
+
+def _cloth(mesh: UsdGeom.Mesh, settings: dict, target: str = "", attached: list[int] = ()) -> None:
+    """SimbakeClothAPI on `mesh` with its `settings` (SHEET's keys), and its `attached` points
+    sewn to the prim `target`."""
+    prim = mesh.GetPrim()
     prim.AddAppliedSchema("SimbakeClothAPI")
-    for name in ("areaDensity", "stretchStiffness", "bendStiffness", "thickness"):
-        key = {"areaDensity": "area_density", "stretchStiffness": "stretch_stiffness",
-               "bendStiffness": "bend_stiffness", "thickness": "thickness"}[name]
-        prim.CreateAttribute(f"simbake:cloth:{name}", Sdf.ValueTypeNames.Float).Set(SHEET[key])
+    for name, key in (("areaDensity", "area_density"), ("stretchStiffness", "stretch_stiffness"),
+                      ("bendStiffness", "bend_stiffness"), ("thickness", "thickness")):
+        prim.CreateAttribute(f"simbake:cloth:{name}", Sdf.ValueTypeNames.Float).Set(settings[key])
+    if target:
+        prim.CreateRelationship("simbake:cloth:attachTo").SetTargets([Sdf.Path(target)])
+        prim.CreateAttribute("simbake:cloth:attached", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(list(attached)))
+
+
+def _cape(stage, target: str) -> None:
+    """The cape (CAPE), its top row attached to `target`."""
+    n, m, h = CAPE["columns"], CAPE["rows"], CAPE["thickness"]
+    theta = np.radians(np.linspace(-CAPE["arc"], CAPE["arc"], n))
+    i, j = np.meshgrid(np.arange(n), np.arange(m), indexing="xy")
+    points = np.stack([(R + h) * np.sin(theta)[i], Y0 + (R + h) * np.cos(theta)[i],
+                       -CAPE["length"] * j / (m - 1)], axis=-1).reshape(-1, 3)
+    p00 = (j[:-1, :-1] * n + i[:-1, :-1]).ravel()
+    tris = np.concatenate([np.stack([p00, p00 + n + 1, p00 + n], -1), np.stack([p00, p00 + 1, p00 + n + 1], -1)])
+    _cloth(_mesh(stage, "/World/Cape", points, [3] * len(tris), tris.reshape(-1)), CAPE, target, range(n))
+
+
+def _sampled_sphere(stage, dr: float | None = None) -> None:
+    unit, counts, indices = unit_sphere()
+    centre, radius = sphere_at(START, dr)
+    body = _mesh(stage, "/World/Body", centre + radius * unit, counts, indices)
+    UsdPhysics.CollisionAPI.Apply(body.GetPrim())
+    for frame in range(START, END + 1):
+        centre, radius = sphere_at(frame, dr)
+        body.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy((centre + radius * unit).astype(np.float32)), frame)
 
 
 def write_deforming_sphere(path: Path) -> Path:
     stage = _stage(path)
-    unit, counts, indices = unit_sphere()
-    centre, radius = sphere_at(START)
-    body = _mesh(stage, "/World/Body", centre + radius * unit, counts, indices)
-    UsdPhysics.CollisionAPI.Apply(body.GetPrim())
-    for frame in range(START, END + 1):
-        centre, radius = sphere_at(frame)
-        body.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy((centre + radius * unit).astype(np.float32)), frame)
+    _sampled_sphere(stage)
     _sheet(stage)
     stage.GetRootLayer().Save()
     return path
 
 
-def write_skinned_sphere(path: Path, method: str = "classicLinear") -> Path:
+def write_caped_sphere(path: Path, skinned: bool = False) -> Path:
+    """The cape (CAPE) sewn to the swaying sphere, its points time-sampled or skinned."""
+    if skinned:
+        return write_skinned_sphere(path, dr=CAPE["dr"], cloth=lambda stage: _cape(stage, "/World/Character/Body"))
+    stage = _stage(path)
+    _sampled_sphere(stage, CAPE["dr"])
+    _cape(stage, "/World/Body")
+    stage.GetRootLayer().Save()
+    return path
+
+
+def write_skinned_sphere(path: Path, method: str = "classicLinear", dr: float | None = None, cloth=None) -> Path:
     stage = _stage(path)
     root = UsdSkel.Root.Define(stage, "/World/Character")
     skeleton = UsdSkel.Skeleton.Define(stage, "/World/Character/Skel")
@@ -149,7 +210,7 @@ def write_skinned_sphere(path: Path, method: str = "classicLinear") -> Path:
     anim.CreateRotationsAttr(Vt.QuatfArray([Gf.Quatf(1.0)]))
     translations, scales = anim.CreateTranslationsAttr(), anim.CreateScalesAttr()
     for frame in range(START, END + 1):
-        centre, radius = sphere_at(frame)
+        centre, radius = sphere_at(frame, dr)
         translations.Set(Vt.Vec3fArray([Gf.Vec3f(*centre)]), frame)
         s = radius / R
         scales.Set(Vt.Vec3hArray([Gf.Vec3h(s, s, s)]), frame)
@@ -165,7 +226,7 @@ def write_skinned_sphere(path: Path, method: str = "classicLinear") -> Path:
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
     binding.CreateSkinningMethodAttr(method)
     del root
-    _sheet(stage)
+    (cloth or _sheet)(stage)
     stage.GetRootLayer().Save()
     return path
 
@@ -196,10 +257,123 @@ def write_rising_floor(path: Path) -> Path:
     return path
 
 
+def elbow_angle(frame: float) -> float:
+    """The elbow's bend (rad) at a frame: 0 before BEND, pi / 2 after, eased in between."""
+    s = min(max((frame - BEND[0]) / (BEND[1] - BEND[0]), 0.0), 1.0)
+    return 0.5 * math.pi * (3 * s * s - 2 * s * s * s)
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def arm_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """The arm at rest: points (its axis at height ARM_Y along +x) and triangles, closed, wound
+    outwards (rings of segments, a centre point at each end)."""
+    n, m = ARM["rings"], ARM["segments"]
+    x = np.linspace(ARM["start"], ARM["end"], n)
+    phi = 2.0 * np.pi * np.arange(m) / m
+    r = ARM["radius"]
+    ring = np.stack([np.broadcast_to(x[:, None], (n, m)), ARM_Y + r * np.cos(phi)[None, :].repeat(n, 0),
+                     r * np.sin(phi)[None, :].repeat(n, 0)], axis=-1).reshape(-1, 3)
+    points = np.concatenate([ring, [[ARM["start"], ARM_Y, 0.0], [ARM["end"], ARM_Y, 0.0]]])
+    first, last = n * m, n * m + 1
+    tris = []
+    for i in range(n - 1):
+        for j in range(m):
+            a, b = i * m + j, i * m + (j + 1) % m
+            c, d = a + m, b + m
+            tris += [(a, b, d), (a, d, c)]
+    for j in range(m):
+        tris.append((first, (j + 1) % m, j))
+        tris.append((last, (n - 1) * m + j, (n - 1) * m + (j + 1) % m))
+    return points, np.array(tris, dtype=np.int32)
+
+
+def elbow_weights(points: np.ndarray) -> np.ndarray:
+    """Each point's weight on the elbow joint (the shoulder's is 1 less it)."""
+    return _smoothstep((points[:, 0] - (ARM["elbow"] - ARM["blend"])) / (2.0 * ARM["blend"]))
+
+
+def _hinge() -> np.ndarray:
+    return np.array([ARM["elbow"], ARM_Y, -ARM["radius"]])
+
+
+def arm_at(frame: float, points: np.ndarray | None = None) -> np.ndarray:
+    """The arm's points (or `points`, weighted as the arm's are) at a frame, skinned by linear
+    blending: (1 - w) p + w (R (p - e) + e), R the elbow's turn about +y and e its hinge."""
+    points = arm_mesh()[0] if points is None else points
+    a = elbow_angle(frame)
+    turn = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+    e = _hinge()
+    w = elbow_weights(points)[:, None]
+    return (1.0 - w) * points + w * ((points - e) @ turn.T + e)
+
+
+def sleeve_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """The sleeve: rings along +x from the shoulder end, its first ring the cloth's thickness off
+    the arm, widening to SLEEVE["radius"] over SLEEVE["taper"]; triangles wound outwards."""
+    n, m = SLEEVE["rings"], SLEEVE["segments"]
+    x = np.linspace(0.0, SLEEVE["length"], n)
+    inner = ARM["radius"] + SLEEVE["thickness"]
+    radius = inner + (SLEEVE["radius"] - inner) * _smoothstep(x / SLEEVE["taper"])
+    phi = 2.0 * np.pi * (np.arange(m) + 0.5) / m
+    points = np.stack([np.broadcast_to(x[:, None], (n, m)), ARM_Y + radius[:, None] * np.cos(phi)[None, :],
+                       radius[:, None] * np.sin(phi)[None, :]], axis=-1).reshape(-1, 3)
+    tris = []
+    for i in range(n - 1):
+        for j in range(m):
+            a, b = i * m + j, i * m + (j + 1) % m
+            tris += [(a, b, b + m), (a, b + m, a + m)]
+    return points, np.array(tris, dtype=np.int32)
+
+
+def write_sleeve(path: Path) -> Path:
+    stage = _stage(path, ground=False)
+    UsdSkel.Root.Define(stage, "/World/Character")
+    skeleton = UsdSkel.Skeleton.Define(stage, "/World/Character/Skel")
+    joints = ["shoulder", "shoulder/elbow"]
+    skeleton.CreateJointsAttr(Vt.TokenArray(joints))
+    shoulder = Gf.Matrix4d(1.0).SetTranslate(Gf.Vec3d(0.0, ARM_Y, 0.0))
+    e = _hinge()
+    elbow_world = Gf.Matrix4d(1.0).SetTranslate(Gf.Vec3d(*e))
+    elbow_local = Gf.Matrix4d(1.0).SetTranslate(Gf.Vec3d(e[0], 0.0, e[2]))
+    skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray([shoulder, elbow_world]))
+    skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray([shoulder, elbow_local]))
+    anim = UsdSkel.Animation.Define(stage, "/World/Character/Skel/Anim")
+    anim.CreateJointsAttr(Vt.TokenArray(joints))
+    anim.CreateTranslationsAttr(Vt.Vec3fArray([Gf.Vec3f(0.0, ARM_Y, 0.0), Gf.Vec3f(float(e[0]), 0.0, float(e[2]))]))
+    anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1.0, 1.0, 1.0)] * 2))
+    rotations = anim.CreateRotationsAttr()
+    for frame in range(START, END + 1):
+        a = elbow_angle(frame)
+        rotations.Set(Vt.QuatfArray([Gf.Quatf(1.0), Gf.Quatf(math.cos(a / 2), 0.0, math.sin(a / 2), 0.0)]), frame)
+    UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    points, triangles = arm_mesh()
+    arm = _mesh(stage, "/World/Character/Arm", points, [3] * len(triangles), triangles.reshape(-1))
+    UsdPhysics.CollisionAPI.Apply(arm.GetPrim())
+    binding = UsdSkel.BindingAPI.Apply(arm.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skeleton.GetPath()])
+    w = elbow_weights(points)
+    binding.CreateJointIndicesPrimvar(False, 2).Set(Vt.IntArray([0, 1] * len(points)))
+    binding.CreateJointWeightsPrimvar(False, 2).Set(Vt.FloatArray(np.stack([1.0 - w, w], -1).reshape(-1).tolist()))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
+    binding.CreateSkinningMethodAttr("classicLinear")
+    points, triangles = sleeve_mesh()
+    _cloth(_mesh(stage, "/World/Sleeve", points, [3] * len(triangles), triangles.reshape(-1)), SLEEVE,
+           str(arm.GetPath()), range(SLEEVE["segments"]))
+    stage.GetRootLayer().Save()
+    return path
+
+
 def main() -> None:
     write_deforming_sphere(HERE / "deforming_sphere.usda")
     write_skinned_sphere(HERE / "skinned_sphere.usda")
     write_rising_floor(HERE / "rising_floor.usda")
+    write_caped_sphere(HERE / "caped_sphere.usda")
+    write_caped_sphere(HERE / "caped_skinned_sphere.usda", skinned=True)
+    write_sleeve(HERE / "sleeve.usda")
 
 
 if __name__ == "__main__":
