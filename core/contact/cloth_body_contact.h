@@ -12,6 +12,7 @@
 
 #include "cloth/cloth.h"
 #include "contact/body_features.h"
+#include "contact/cloth_nearby.h"
 #include "contact/contact_bodies.h"
 #include "geometry/mesh.h"
 #include "levelset/signed_distance.h"
@@ -100,6 +101,10 @@ class ClothBodyContact {
   double mean_edge_;                            // mean rest edge length (m)
   Touches touches_;
   TriangleGrid grid_;                           // scratch: the triangles at the candidate positions
+  // (nvert x 3) collide's candidates x + dt v, kept as its contacts change v, and which of
+  // them are near each body (contact/cloth_nearby.h)
+  Points candidates_;
+  ClothNearby nearby_;
   std::vector<std::array<int, 3>> triangle_edges_;  // (ntri) each triangle's edges (indices into edges_)
   std::vector<int> triangle_seen_, edge_seen_;  // scratch: the body edge that last looked at each (collide_features)
   int edge_mark_ = -1;                          // the last body edge's mark
