@@ -149,14 +149,20 @@ void mesh_edge_features(const Points& vertices, const Triangles& triangles, doub
   }
 }
 
-bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
-                              double h, double band, Vec3& w, Vec3& normal, double& phi) {
-  // the plane's unit normal, turned towards the feature's outside
-  normal = (b - a).cross(c - a);
-  const double twice_area = normal.norm();
+bool triangle_plane(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& winding, double& twice_area) {
+  winding = (b - a).cross(c - a);
+  twice_area = winding.norm();
   if (!(twice_area > 0.0)) return false;
-  normal /= twice_area;
-  const Vec3 winding = normal;  // (b - a) x (c - a), unit
+  winding /= twice_area;
+  return true;
+}
+
+bool feature_against_plane(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
+                           const Vec3& winding, double twice_area, double h, double band, Vec3& w, Vec3& normal,
+                           double& phi) {
+  if (!(twice_area > 0.0)) return false;
+  // the plane's unit normal, turned towards the feature's outside
+  normal = winding;
   if (normal.dot(nf) < 0.0) normal = -normal;
   phi = (a - f).dot(normal);
   if (!(phi < h && phi > -band)) return false;
@@ -166,6 +172,14 @@ bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, cons
   w[1] = (c - p).cross(a - p).dot(winding) / twice_area;
   w[2] = 1.0 - w[0] - w[1];
   return w.minCoeff() >= 0.0;
+}
+
+bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
+                              double h, double band, Vec3& w, Vec3& normal, double& phi) {
+  Vec3 winding;
+  double twice_area;
+  if (!triangle_plane(a, b, c, winding, twice_area)) return false;
+  return feature_against_plane(f, nf, a, b, c, winding, twice_area, h, band, w, normal, phi);
 }
 
 long long TriangleGrid::key(const Vec3& p) const {
@@ -187,7 +201,7 @@ long long TriangleGrid::dense_cell(const std::array<long long, 3>& i) const {
 }
 
 void TriangleGrid::build(const Points& x, const Triangles& triangles, double cell, double margin,
-                         const Box3& region, bool dense) {
+                         const Box3& region, const std::vector<int>* consider, bool dense) {
   cell_ = cell;
   entries_.clear();
   kept_.clear();
@@ -199,7 +213,9 @@ void TriangleGrid::build(const Points& x, const Triangles& triangles, double cel
   low.fill(std::numeric_limits<long long>::max());
   high.fill(std::numeric_limits<long long>::min());
   long long entries = 0;
-  for (int t = 0; t < triangles.rows(); ++t) {
+  const int listed = consider ? static_cast<int>(consider->size()) : static_cast<int>(triangles.rows());
+  for (int c = 0; c < listed; ++c) {
+    const int t = consider ? (*consider)[c] : c;
     Box3 box;
     for (int v = 0; v < 3; ++v) box.extend(Vec3(x.row(triangles(t, v)).transpose()));
     Vec3 lo = box.min().array() - margin, hi = box.max().array() + margin;

@@ -87,6 +87,13 @@ void mesh_edge_features(const Points& vertices, const Triangles& triangles, doub
 // weights w, the normal n_t (turned towards nf) and the distance phi
 bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
                               double h, double band, Vec3& w, Vec3& normal, double& phi);
+// The same in two parts, so that a triangle's plane can be kept for many features: its unit
+// normal along (b - a) x (c - a) and twice its area (false, and 0, for a degenerate triangle);
+// then the feature against it (false for a degenerate triangle)
+bool triangle_plane(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& winding, double& twice_area);
+bool feature_against_plane(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
+                           const Vec3& winding, double twice_area, double h, double band, Vec3& w, Vec3& normal,
+                           double& phi);
 
 // A uniform grid over triangles' boxes (grown by a margin): the triangles whose box may hold
 // a point. A triangle is listed in every cell its grown box meets (clipped to the region
@@ -101,8 +108,10 @@ class TriangleGrid {
   static constexpr long long kDenseCellsPerEntry = 4;
   // the triangles (at positions x) whose box grown by `margin` meets `region`; queries only
   // of points in `region` (or near it: what is in their cell); `dense` false: sorted entries
+  // (`consider`: only those of these triangles, increasing, a list that holds every one that
+  // qualifies; null: all)
   void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region,
-             bool dense = true);
+             const std::vector<int>* consider = nullptr, bool dense = true);
   // the triangles whose grown box's cells include p's cell, in increasing order
   void query(const Vec3& p, std::vector<int>& out) const;
   // p's cell (two points in the same cell have the same query)

@@ -76,7 +76,9 @@ ClothBodyContact::ClothBodyContact(const Cloth& cloth)
       triangle_edges_[t][k] = static_cast<int>(std::lower_bound(edges_.begin(), edges_.end(), e) - edges_.begin());
     }
   }
-  nearby_ = ClothNearby(cloth.vertex_count(), edges_);
+  nearby_ = ClothNearby(cloth.vertex_count(), edges_, cloth.triangles());
+  planes_.resize(cloth.triangles().rows());
+  vertex_changed_.assign(cloth.vertex_count(), 0);
   triangle_seen_.assign(triangles.rows(), -1);
   edge_seen_.assign(edges_.size(), -1);
   double total = 0.0;
@@ -136,7 +138,10 @@ bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies&
   for (int k = 0; k < 8; ++k) region.extend(pose.apply(features.bounds.corner(static_cast<Box3::CornerType>(k))));
   region.min().array() -= edge;
   region.max().array() += edge;
-  grid_.build(candidates_, triangles, edge, 2.0 * h, region);
+  Box3 reached = region;  // (the triangles whose box grown by the grid's margin may meet the region)
+  reached.min().array() -= 2.0 * h;
+  reached.max().array() += 2.0 * h;
+  grid_.build(candidates_, triangles, edge, 2.0 * h, region, &nearby_.triangles(reached));
   const auto candidate = [&](int k) { return Vec3(candidates_.row(k).transpose()); };
   std::vector<int> near;
   bool touched = false;
@@ -145,12 +150,16 @@ bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies&
     grid_.query(p, near);
     for (int t : near) {
       const int ids[3] = {triangles(t, 0), triangles(t, 1), triangles(t, 2)};
+      const Vec3 a = candidate(ids[0]), b = candidate(ids[1]), c = candidate(ids[2]);
+      TrianglePlane& plane = planes_[t];
+      if (plane.at < pass_stamp_ ||
+          plane.at < std::max({vertex_changed_[ids[0]], vertex_changed_[ids[1]], vertex_changed_[ids[2]]})) {
+        triangle_plane(a, b, c, plane.winding, plane.twice_area);
+        plane.at = stamp_;
+      }
       Vec3 w, normal;
       double phi;
-      if (!feature_against_triangle(p, nf, candidate(ids[0]), candidate(ids[1]), candidate(ids[2]), h, edge, w,
-                                    normal, phi)) {
-        continue;
-      }
+      if (!feature_against_plane(p, nf, a, b, c, plane.winding, plane.twice_area, h, edge, w, normal, phi)) continue;
       // a plane behind the feature is the cloth pierced only if its point there is inside the
       // body (not a layer on the body's far side)
       const Vec3 xc = p + phi * normal;
@@ -413,6 +422,7 @@ void ClothBodyContact::contact_point(const Points& x, Points& v, ContactBodies& 
     v.row(ids[i]) += (w[i] * inverse_mass[ids[i]] / denom) * change.transpose();
     candidates_.row(ids[i]) = x.row(ids[i]) + dt * v.row(ids[i]);
     nearby_.moved(ids[i]);
+    vertex_changed_[ids[i]] = ++stamp_;
     if (w[i] > 0.0 && inverse_mass[ids[i]] > 0.0 && still_surface(bodies, body)) {
       touches.normal[ids[i]] += w[i] * normal;
       touches.body[ids[i]] = body;
@@ -502,6 +512,7 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
 
   candidates_ = x + dt * v;
   nearby_.begin(candidates_);
+  pass_stamp_ = ++stamp_;
   // the cloth's box over the step, to skip bodies it cannot reach
   Box3 reach;
   for (int k = 0; k < n; ++k) {

@@ -17,22 +17,33 @@ constexpr int kCubesAcross = 64;          // and cubes no smaller than 1/64 of t
 constexpr double kRoundOff = 1e-9;
 }  // namespace
 
-ClothNearby::ClothNearby(int vertex_count, const std::vector<std::array<int, 2>>& edges)
+namespace {
+// each vertex's items (the vertices of items[i] in `ends`) in increasing order, as (start, list)
+template <class Ends>
+void by_vertex(int vertex_count, const std::vector<Ends>& ends, std::vector<int>& start, std::vector<int>& items) {
+  start.assign(vertex_count + 1, 0);
+  for (const Ends& e : ends) {
+    for (int k : e) ++start[k + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  items.resize(start.back());
+  std::vector<int> fill(start.begin(), start.end() - 1);
+  for (int i = 0; i < static_cast<int>(ends.size()); ++i) {
+    for (int k : ends[i]) items[fill[k]++] = i;
+  }
+}
+}  // namespace
+
+ClothNearby::ClothNearby(int vertex_count, const std::vector<std::array<int, 2>>& edges, const Triangles& triangles)
     : vertex_count_(vertex_count), edges_(&edges) {
-  edge_start_.assign(vertex_count + 1, 0);
-  for (const auto& e : edges) {
-    ++edge_start_[e[0] + 1];
-    ++edge_start_[e[1] + 1];
-  }
-  std::partial_sum(edge_start_.begin(), edge_start_.end(), edge_start_.begin());
-  vertex_edges_.resize(edge_start_.back());
-  std::vector<int> fill(edge_start_.begin(), edge_start_.end() - 1);
-  for (int e = 0; e < static_cast<int>(edges.size()); ++e) {
-    for (int k : edges[e]) vertex_edges_[fill[k]++] = e;  // (edges in increasing order)
-  }
+  by_vertex(vertex_count, edges, edge_start_, vertex_edges_);
+  std::vector<std::array<int, 3>> corners(triangles.rows());
+  for (int t = 0; t < triangles.rows(); ++t) corners[t] = {triangles(t, 0), triangles(t, 1), triangles(t, 2)};
+  by_vertex(vertex_count, corners, triangle_start_, vertex_triangles_);
   moved_mark_.assign(vertex_count, 0);
   vertex_mark_.assign(vertex_count, 0);
   edge_mark_.assign(edges.size(), 0);
+  triangle_mark_.assign(triangles.rows(), 0);
 }
 
 long long ClothNearby::cube(int axis, double coordinate) const {
@@ -86,6 +97,7 @@ void ClothNearby::gather(const Box3& box) {
   if (mark_ == std::numeric_limits<int>::max()) {
     std::fill(vertex_mark_.begin(), vertex_mark_.end(), 0);
     std::fill(edge_mark_.begin(), edge_mark_.end(), 0);
+    std::fill(triangle_mark_.begin(), triangle_mark_.end(), 0);
     mark_ = 0;
   }
   ++mark_;
@@ -114,9 +126,52 @@ void ClothNearby::gather(const Box3& box) {
   for (int k : moved_) add(k);
 }
 
+namespace {
+// (few: sorted; many beside the range they span: read off the marks in order)
+void sorted_marked(std::vector<int>& found, const std::vector<int>& marks, int mark) {
+  if (found.size() < 64) {
+    std::sort(found.begin(), found.end());
+    return;
+  }
+  const auto [lo, hi] = std::minmax_element(found.begin(), found.end());
+  const int first = *lo, last = *hi;
+  if (static_cast<double>(last - first) > 8.0 * found.size()) {
+    std::sort(found.begin(), found.end());
+    return;
+  }
+  found.clear();
+  for (int i = first; i <= last; ++i) {
+    if (marks[i] == mark) found.push_back(i);
+  }
+}
+}  // namespace
+
 const std::vector<int>& ClothNearby::vertices(const Box3& box) {
   gather(box);
-  std::sort(found_.begin(), found_.end());
+  sorted_marked(found_, vertex_mark_, mark_);
+  return found_;
+}
+
+void ClothNearby::items_of_found(const std::vector<int>& start, const std::vector<int>& items, std::vector<int>& marks) {
+  ends_.swap(found_);  // (the vertices)
+  found_.clear();
+  for (int k : ends_) {
+    for (int s = start[k]; s < start[k + 1]; ++s) {
+      const int i = items[s];
+      if (marks[i] == mark_) continue;
+      marks[i] = mark_;
+      found_.push_back(i);
+    }
+  }
+  sorted_marked(found_, marks, mark_);
+}
+
+const std::vector<int>& ClothNearby::triangles(const Box3& box) {
+  Box3 grown = box;
+  grown.min().array() -= reach_;
+  grown.max().array() += reach_;
+  gather(grown);
+  items_of_found(triangle_start_, vertex_triangles_, triangle_mark_);
   return found_;
 }
 
@@ -125,17 +180,7 @@ void ClothNearby::begin_edges(const Box3& box) {
   grown.min().array() -= reach_;
   grown.max().array() += reach_;
   gather(grown);
-  ends_.swap(found_);  // (the vertices)
-  found_.clear();
-  for (int k : ends_) {
-    for (int s = edge_start_[k]; s < edge_start_[k + 1]; ++s) {
-      const int e = vertex_edges_[s];
-      if (edge_mark_[e] == mark_) continue;
-      edge_mark_[e] = mark_;
-      found_.push_back(e);
-    }
-  }
-  std::sort(found_.begin(), found_.end());
+  items_of_found(edge_start_, vertex_edges_, edge_mark_);
   heap_.clear();
   next_ = 0;
   moved_seen_ = moved_.size();

@@ -23,7 +23,7 @@ namespace simbake {
 class ClothNearby {
  public:
   ClothNearby() = default;
-  ClothNearby(int vertex_count, const std::vector<std::array<int, 2>>& edges);
+  ClothNearby(int vertex_count, const std::vector<std::array<int, 2>>& edges, const Triangles& triangles);
 
   // a pass begins: every vertex's candidate (nvert x 3, m)
   void begin(const Points& candidates);
@@ -38,6 +38,9 @@ class ClothNearby {
   // the vertices whose candidate may lie in `box` now, increasing
   const std::vector<int>& vertices(const Box3& box);
 
+  // the triangles whose box may meet `box` now, increasing
+  const std::vector<int>& triangles(const Box3& box);
+
   // the edges that may have a point in `box` now, one by one, increasing: begin_edges, then
   // next_edge until it returns -1; the edges of a vertex moved meanwhile are added
   void begin_edges(const Box3& box);
@@ -47,9 +50,13 @@ class ClothNearby {
   // the vertices in the cubes `box` meets, and those moved, unordered (into found_)
   void gather(const Box3& box);
   long long cube(int axis, double coordinate) const;
+  // the items (edges or triangles, each marked mark_ in `marks`) of the vertices found_ (by
+  // `start`, `items`: each vertex's, increasing), in increasing order, into found_
+  void items_of_found(const std::vector<int>& start, const std::vector<int>& items, std::vector<int>& marks);
 
   int vertex_count_ = 0;
   std::vector<int> edge_start_, vertex_edges_;  // (nvert + 1), (2 nedge): each vertex's edges, increasing
+  std::vector<int> triangle_start_, vertex_triangles_;  // (nvert + 1), (3 ntri): each vertex's triangles
   const std::vector<std::array<int, 2>>* edges_ = nullptr;
 
   // the grid of the pass's candidates: cubes [origin + size * i, origin + size * (i + 1)) of
@@ -67,7 +74,7 @@ class ClothNearby {
 
   // scratch
   int mark_ = 0;
-  std::vector<int> vertex_mark_, edge_mark_;  // (nvert), (nedge)
+  std::vector<int> vertex_mark_, edge_mark_, triangle_mark_;  // (nvert), (nedge), (ntri)
   std::vector<int> found_;                    // vertices (vertices()) or edges (begin_edges) found
   std::vector<int> ends_;                     // the vertices whose edges begin_edges lists
   std::vector<int> heap_;                     // edges added while the edges are visited (a min-heap)

@@ -332,8 +332,8 @@ TEST(BodyFeatures, TriangleGridLayoutsListTheSameTriangles) {
     const Vec3 half = Vec3::Constant(0.02 + 1.5 * unit(random));
     const Box3 region(centre - half, centre + half);
     TriangleGrid dense, sorted;
-    dense.build(x, triangles, cell, margin, region, true);
-    sorted.build(x, triangles, cell, margin, region, false);
+    dense.build(x, triangles, cell, margin, region, nullptr, true);
+    sorted.build(x, triangles, cell, margin, region, nullptr, false);
     std::vector<int> a, b;
     for (int q = 0; q < 2000; ++q) {
       // points in the region and up to two cells around it

@@ -61,7 +61,7 @@ TEST(ClothNearby, ListsEveryVertexAndEdgeInTheBoxInOrder) {
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   for (int trial = 0; trial < 30; ++trial) {
     Sheet s = crumpled(random, trial % 3 == 0 ? 0.2 : 0.01);
-    ClothNearby nearby(static_cast<int>(s.x.rows()), s.edges);
+    ClothNearby nearby(static_cast<int>(s.x.rows()), s.edges, s.triangles);
     nearby.begin(s.x);
     for (int body = 0; body < 6; ++body) {
       const Vec3 centre(1.2 * unit(random), 0.2 * unit(random) - 0.1, 1.2 * unit(random));
