@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 namespace simbake {
 
@@ -148,14 +149,20 @@ void mesh_edge_features(const Points& vertices, const Triangles& triangles, doub
   }
 }
 
-bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
-                              double h, double band, Vec3& w, Vec3& normal, double& phi) {
-  // the plane's unit normal, turned towards the feature's outside
-  normal = (b - a).cross(c - a);
-  const double twice_area = normal.norm();
+bool triangle_plane(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& winding, double& twice_area) {
+  winding = (b - a).cross(c - a);
+  twice_area = winding.norm();
   if (!(twice_area > 0.0)) return false;
-  normal /= twice_area;
-  const Vec3 winding = normal;  // (b - a) x (c - a), unit
+  winding /= twice_area;
+  return true;
+}
+
+bool feature_against_plane(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
+                           const Vec3& winding, double twice_area, double h, double band, Vec3& w, Vec3& normal,
+                           double& phi) {
+  if (!(twice_area > 0.0)) return false;
+  // the plane's unit normal, turned towards the feature's outside
+  normal = winding;
   if (normal.dot(nf) < 0.0) normal = -normal;
   phi = (a - f).dot(normal);
   if (!(phi < h && phi > -band)) return false;
@@ -167,21 +174,48 @@ bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, cons
   return w.minCoeff() >= 0.0;
 }
 
+bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
+                              double h, double band, Vec3& w, Vec3& normal, double& phi) {
+  Vec3 winding;
+  double twice_area;
+  if (!triangle_plane(a, b, c, winding, twice_area)) return false;
+  return feature_against_plane(f, nf, a, b, c, winding, twice_area, h, band, w, normal, phi);
+}
+
 long long TriangleGrid::key(const Vec3& p) const {
-  // 21 bits per axis, wrapped: distinct cells may share a key, which only adds candidates
+  // 21 bits per axis, wrapped
   long long k = 0;
-  for (int a = 0; a < 3; ++a) {
-    const long long i = static_cast<long long>(std::floor(p[a] / cell_)) & ((1 << 21) - 1);
-    k = (k << 21) | i;
-  }
+  for (int a = 0; a < 3; ++a) k = (k << 21) | (index(p[a]) & kWrap);
   return k;
 }
 
+long long TriangleGrid::dense_cell(const std::array<long long, 3>& i) const {
+  long long c = 0;
+  for (int a = 0; a < 3; ++a) {
+    // the block's cell named as i is named (its extent is under the wrap, so there is at most one)
+    const long long offset = (i[a] - base_[a]) & kWrap;
+    if (offset >= size_[a]) return -1;
+    c = c * size_[a] + offset;
+  }
+  return c;
+}
+
 void TriangleGrid::build(const Points& x, const Triangles& triangles, double cell, double margin,
-                         const Box3& region) {
+                         const Box3& region, const std::vector<int>* consider, bool dense) {
   cell_ = cell;
   entries_.clear();
-  for (int t = 0; t < triangles.rows(); ++t) {
+  kept_.clear();
+  indices_.clear();
+  spans_.clear();
+  // each triangle's cells, axis by axis: a cell's index is that of its centre, stepping a cell
+  // at a time from the one at the box's low corner
+  std::array<long long, 3> low{}, high{};
+  low.fill(std::numeric_limits<long long>::max());
+  high.fill(std::numeric_limits<long long>::min());
+  long long entries = 0;
+  const int listed = consider ? static_cast<int>(consider->size()) : static_cast<int>(triangles.rows());
+  for (int c = 0; c < listed; ++c) {
+    const int t = consider ? (*consider)[c] : c;
     Box3 box;
     for (int v = 0; v < 3; ++v) box.extend(Vec3(x.row(triangles(t, v)).transpose()));
     Vec3 lo = box.min().array() - margin, hi = box.max().array() + margin;
@@ -190,20 +224,76 @@ void TriangleGrid::build(const Points& x, const Triangles& triangles, double cel
     // far across it, by a vertex flung out of a bad step, would list cells without bound)
     lo = lo.cwiseMax(region.min() - Vec3::Constant(cell));
     hi = hi.cwiseMin(region.max() + Vec3::Constant(cell));
-    for (double gx = std::floor(lo.x() / cell) * cell; gx <= hi.x(); gx += cell) {
-      for (double gy = std::floor(lo.y() / cell) * cell; gy <= hi.y(); gy += cell) {
-        for (double gz = std::floor(lo.z() / cell) * cell; gz <= hi.z(); gz += cell) {
-          entries_.push_back({key(Vec3(gx, gy, gz) + Vec3::Constant(0.5 * cell)), t});
-        }
+    std::array<int, 4> span;
+    long long count = 1;
+    for (int a = 0; a < 3; ++a) {
+      span[a] = static_cast<int>(indices_.size());
+      for (double g = std::floor(lo[a] / cell) * cell; g <= hi[a]; g += cell) {
+        const long long i = index(g + 0.5 * cell);
+        indices_.push_back(i);
+        low[a] = std::min(low[a], i);
+        high[a] = std::max(high[a], i);
+      }
+      count *= static_cast<long long>(indices_.size()) - span[a];
+    }
+    span[3] = static_cast<int>(indices_.size());
+    entries += count;
+    kept_.push_back(t);
+    spans_.push_back(span);
+  }
+  // a dense block of the cells listed, when it is small beside the entries and its extent
+  // along each axis is under the wrap (then the wrapped names are unique in it)
+  double volume = 1.0;
+  dense_ = dense && !kept_.empty();
+  for (int a = 0; a < 3 && dense_; ++a) {
+    base_[a] = low[a];
+    size_[a] = high[a] - low[a] + 1;
+    dense_ = size_[a] <= kWrap;
+    volume *= static_cast<double>(size_[a]);
+  }
+  dense_ = dense_ && volume <= static_cast<double>(kDenseCellsPerEntry * entries + 64);
+  const auto each_cell = [&](size_t k, auto&& f) {
+    const std::array<int, 4>& s = spans_[k];
+    for (int ix = s[0]; ix < s[1]; ++ix) {
+      for (int iy = s[1]; iy < s[2]; ++iy) {
+        for (int iz = s[2]; iz < s[3]; ++iz) f(std::array<long long, 3>{indices_[ix], indices_[iy], indices_[iz]});
       }
     }
+  };
+  if (!dense_) {
+    for (size_t k = 0; k < kept_.size(); ++k) {
+      each_cell(k, [&](const std::array<long long, 3>& i) {
+        entries_.push_back({((i[0] & kWrap) << 42) | ((i[1] & kWrap) << 21) | (i[2] & kWrap), kept_[k]});
+      });
+    }
+    std::sort(entries_.begin(), entries_.end());
+    entries_.erase(std::unique(entries_.begin(), entries_.end()), entries_.end());
+    return;
   }
-  std::sort(entries_.begin(), entries_.end());
-  entries_.erase(std::unique(entries_.begin(), entries_.end()), entries_.end());
+  // counting: each bucket's size, its start, then the triangles in increasing order (a
+  // triangle listed twice in a cell, once)
+  const size_t cells = static_cast<size_t>(volume);
+  starts_.assign(cells + 1, 0);
+  for (size_t k = 0; k < kept_.size(); ++k) each_cell(k, [&](const std::array<long long, 3>& i) { ++starts_[dense_cell(i) + 1]; });
+  for (size_t c = 0; c < cells; ++c) starts_[c + 1] += starts_[c];
+  ends_.assign(starts_.begin(), starts_.end() - 1);
+  items_.resize(starts_[cells]);
+  for (size_t k = 0; k < kept_.size(); ++k) {
+    const int t = kept_[k];
+    each_cell(k, [&](const std::array<long long, 3>& i) {
+      const long long c = dense_cell(i);
+      if (ends_[c] == starts_[c] || items_[ends_[c] - 1] != t) items_[ends_[c]++] = t;
+    });
+  }
 }
 
 void TriangleGrid::query(const Vec3& p, std::vector<int>& out) const {
   out.clear();
+  if (dense_) {
+    const long long c = dense_cell({index(p.x()), index(p.y()), index(p.z())});
+    if (c >= 0) out.assign(items_.begin() + starts_[c], items_.begin() + ends_[c]);
+    return;
+  }
   const long long k = key(p);
   auto it = std::lower_bound(entries_.begin(), entries_.end(), std::make_pair(k, -1));
   for (; it != entries_.end() && it->first == k; ++it) out.push_back(it->second);

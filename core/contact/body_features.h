@@ -36,6 +36,8 @@
 
 #include "math/types.h"
 
+#include <array>
+#include <cmath>
 #include <vector>
 
 namespace simbake {
@@ -85,23 +87,53 @@ void mesh_edge_features(const Points& vertices, const Triangles& triangles, doub
 // weights w, the normal n_t (turned towards nf) and the distance phi
 bool feature_against_triangle(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
                               double h, double band, Vec3& w, Vec3& normal, double& phi);
+// The same in two parts, so that a triangle's plane can be kept for many features: its unit
+// normal along (b - a) x (c - a) and twice its area (false, and 0, for a degenerate triangle);
+// then the feature against it (false for a degenerate triangle)
+bool triangle_plane(const Vec3& a, const Vec3& b, const Vec3& c, Vec3& winding, double& twice_area);
+bool feature_against_plane(const Vec3& f, const Vec3& nf, const Vec3& a, const Vec3& b, const Vec3& c,
+                           const Vec3& winding, double twice_area, double h, double band, Vec3& w, Vec3& normal,
+                           double& phi);
 
 // A uniform grid over triangles' boxes (grown by a margin): the triangles whose box may hold
-// a point. Entries are sorted by (cell, triangle), so queries list triangles in index order.
+// a point. A triangle is listed in every cell its grown box meets (clipped to the region
+// grown by a cell), a cell named by its index along each axis wrapped to 21 bits (distinct
+// cells may share a name, which only adds candidates); a query lists the triangles of its
+// cell's name in index order. Held as buckets of a dense block of cells, filled by counting
+// (no sort), when the block is small beside the entries; else as sorted (cell, triangle)
+// entries. The two give the same lists (tests/cpp/contact/test_body_features.cpp).
 class TriangleGrid {
  public:
+  // the most cells of a dense block, per entry (a block larger than this is sorted instead)
+  static constexpr long long kDenseCellsPerEntry = 4;
   // the triangles (at positions x) whose box grown by `margin` meets `region`; queries only
-  // of points in `region`
-  void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region);
+  // of points in `region` (or near it: what is in their cell); `dense` false: sorted entries
+  // (`consider`: only those of these triangles, increasing, a list that holds every one that
+  // qualifies; null: all)
+  void build(const Points& x, const Triangles& triangles, double cell, double margin, const Box3& region,
+             const std::vector<int>* consider = nullptr, bool dense = true);
   // the triangles whose grown box's cells include p's cell, in increasing order
   void query(const Vec3& p, std::vector<int>& out) const;
   // p's cell (two points in the same cell have the same query)
   long long cell(const Vec3& p) const { return key(p); }
 
  private:
+  static constexpr long long kWrap = (1LL << 21) - 1;  // the mask of a cell's index along an axis
+  long long index(double coordinate) const { return static_cast<long long>(std::floor(coordinate / cell_)); }
   long long key(const Vec3& p) const;
+  // the dense block's cell holding the cells named like index i along each axis, or -1
+  long long dense_cell(const std::array<long long, 3>& i) const;
   double cell_ = 1.0;
-  std::vector<std::pair<long long, int>> entries_;  // (cell key, triangle), sorted
+  bool dense_ = false;
+  std::vector<std::pair<long long, int>> entries_;  // (cell key, triangle), sorted (not dense)
+  // dense: the block of cells [base, base + size) by axis, wrapped indices unique in it
+  std::array<long long, 3> base_{}, size_{};
+  std::vector<int> starts_, ends_;  // (block cells) each bucket's range in items_
+  std::vector<int> items_;          // the triangles of each bucket, increasing
+  // scratch: the kept triangles and their cells' indices along each axis
+  std::vector<int> kept_;
+  std::vector<long long> indices_;             // along x, y, z per kept triangle, in turn
+  std::vector<std::array<int, 4>> spans_;      // (kept) where its x, y, z indices start and end in indices_
 };
 
 }  // namespace simbake

@@ -76,6 +76,9 @@ ClothBodyContact::ClothBodyContact(const Cloth& cloth)
       triangle_edges_[t][k] = static_cast<int>(std::lower_bound(edges_.begin(), edges_.end(), e) - edges_.begin());
     }
   }
+  nearby_ = ClothNearby(cloth.vertex_count(), edges_, cloth.triangles());
+  planes_.resize(cloth.triangles().rows());
+  vertex_changed_.assign(cloth.vertex_count(), 0);
   triangle_seen_.assign(triangles.rows(), -1);
   edge_seen_.assign(edges_.size(), -1);
   double total = 0.0;
@@ -135,10 +138,11 @@ bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies&
   for (int k = 0; k < 8; ++k) region.extend(pose.apply(features.bounds.corner(static_cast<Box3::CornerType>(k))));
   region.min().array() -= edge;
   region.max().array() += edge;
-  grid_.build(cloth.positions() + dt * cloth.velocities(), triangles, edge, 2.0 * h, region);
-  const auto candidate = [&](int k) {
-    return Vec3((cloth.positions().row(k) + dt * cloth.velocities().row(k)).transpose());
-  };
+  Box3 reached = region;  // (the triangles whose box grown by the grid's margin may meet the region)
+  reached.min().array() -= 2.0 * h;
+  reached.max().array() += 2.0 * h;
+  grid_.build(candidates_, triangles, edge, 2.0 * h, region, &nearby_.triangles(reached));
+  const auto candidate = [&](int k) { return Vec3(candidates_.row(k).transpose()); };
   std::vector<int> near;
   bool touched = false;
   for (size_t f = 0; f < features.points.size(); ++f) {
@@ -146,12 +150,16 @@ bool ClothBodyContact::collide_features(const Cloth& cloth, const ContactBodies&
     grid_.query(p, near);
     for (int t : near) {
       const int ids[3] = {triangles(t, 0), triangles(t, 1), triangles(t, 2)};
+      const Vec3 a = candidate(ids[0]), b = candidate(ids[1]), c = candidate(ids[2]);
+      TrianglePlane& plane = planes_[t];
+      if (plane.at < pass_stamp_ ||
+          plane.at < std::max({vertex_changed_[ids[0]], vertex_changed_[ids[1]], vertex_changed_[ids[2]]})) {
+        triangle_plane(a, b, c, plane.winding, plane.twice_area);
+        plane.at = stamp_;
+      }
       Vec3 w, normal;
       double phi;
-      if (!feature_against_triangle(p, nf, candidate(ids[0]), candidate(ids[1]), candidate(ids[2]), h, edge, w,
-                                    normal, phi)) {
-        continue;
-      }
+      if (!feature_against_plane(p, nf, a, b, c, plane.winding, plane.twice_area, h, edge, w, normal, phi)) continue;
       // a plane behind the feature is the cloth pierced only if its point there is inside the
       // body (not a layer on the body's far side)
       const Vec3 xc = p + phi * normal;
@@ -182,9 +190,7 @@ bool ClothBodyContact::collide_feature_edges(const Cloth& cloth, const ContactBo
   const SignedDistance& shape = *bodies.body(b).shape;
   const double h = thickness_;
   const Pose& pose = bodies.body(b).pose;
-  const auto candidate = [&](int k) {
-    return Vec3((cloth.positions().row(k) + dt * cloth.velocities().row(k)).transpose());
-  };
+  const auto candidate = [&](int k) { return Vec3(candidates_.row(k).transpose()); };
   std::vector<int> near;
   bool touched = false;
   std::vector<int> cloth_edges;
@@ -414,6 +420,9 @@ void ClothBodyContact::contact_point(const Points& x, Points& v, ContactBodies& 
   const Vec3 change = (vn + dvn) * normal + slip - relative;  // of the point's velocity
   for (int i = 0; i < count; ++i) {
     v.row(ids[i]) += (w[i] * inverse_mass[ids[i]] / denom) * change.transpose();
+    candidates_.row(ids[i]) = x.row(ids[i]) + dt * v.row(ids[i]);
+    nearby_.moved(ids[i]);
+    vertex_changed_[ids[i]] = ++stamp_;
     if (w[i] > 0.0 && inverse_mass[ids[i]] > 0.0 && still_surface(bodies, body)) {
       touches.normal[ids[i]] += w[i] * normal;
       touches.body[ids[i]] = body;
@@ -455,9 +464,9 @@ void ClothBodyContact::collide_with_body(Cloth& cloth, ContactBodies& bodies, in
   const Vec3 spread = pose.rotation.cwiseAbs() * half + Vec3::Constant(kWorldBoxSlack);
   const Box3 around(centre - spread, centre + spread);
   bool touched = false;
-  for (int k = 0; k < n; ++k) {
+  for (int k : nearby_.vertices(around)) {
     if (pinned[k]) continue;
-    const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+    const Vec3 xc = candidates_.row(k).transpose();
     if (!around.contains(xc)) continue;
     const Vec3 p = pose.apply_inverse(xc);
     if (!local.contains(p)) continue;
@@ -468,10 +477,12 @@ void ClothBodyContact::collide_with_body(Cloth& cloth, ContactBodies& bodies, in
     touched = true;
   }
   // points along the edges (a pole or a box's edge between vertices), at their quarters
-  for (const auto& e : edges_) {
+  nearby_.begin_edges(around);
+  for (int next; (next = nearby_.next_edge()) >= 0;) {
+    const std::array<int, 2>& e = edges_[next];
     if (pinned[e[0]] && pinned[e[1]]) continue;
-    const Vec3 a = (x.row(e[0]) + dt * v.row(e[0])).transpose();
-    const Vec3 d = (x.row(e[1]) + dt * v.row(e[1])).transpose() - a;
+    const Vec3 a = candidates_.row(e[0]).transpose();
+    const Vec3 d = Vec3(candidates_.row(e[1]).transpose()) - a;
     for (double s : {0.25, 0.5, 0.75}) {
       const Vec3 xc = a + s * d;
       if (!around.contains(xc)) continue;
@@ -499,11 +510,14 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
   const double h = thickness_;
   const int n = cloth.vertex_count();
 
+  candidates_ = x + dt * v;
+  nearby_.begin(candidates_);
+  pass_stamp_ = ++stamp_;
   // the cloth's box over the step, to skip bodies it cannot reach
   Box3 reach;
   for (int k = 0; k < n; ++k) {
     reach.extend(Vec3(x.row(k).transpose()));
-    reach.extend(Vec3((x.row(k) + dt * v.row(k)).transpose()));
+    reach.extend(Vec3(candidates_.row(k).transpose()));
   }
   reach.min().array() -= h;
   reach.max().array() += h;
@@ -513,7 +527,7 @@ void ClothBodyContact::collide(Cloth& cloth, ContactBodies& bodies, double dt) {
     const double mu = surface_friction(bodies, -1);
     for (int k = 0; k < n; ++k) {
       if (pinned[k]) continue;
-      const Vec3 xc = (x.row(k) + dt * v.row(k)).transpose();
+      const Vec3 xc = candidates_.row(k).transpose();
       const double phi = xc.y() - ground->height;
       if (phi < h) {
         const double one = 1.0;

@@ -12,6 +12,7 @@
 
 #include "cloth/cloth.h"
 #include "contact/body_features.h"
+#include "contact/cloth_nearby.h"
 #include "contact/contact_bodies.h"
 #include "geometry/mesh.h"
 #include "levelset/signed_distance.h"
@@ -100,6 +101,20 @@ class ClothBodyContact {
   double mean_edge_;                            // mean rest edge length (m)
   Touches touches_;
   TriangleGrid grid_;                           // scratch: the triangles at the candidate positions
+  // (nvert x 3) collide's candidates x + dt v, kept as its contacts change v, and which of
+  // them are near each body (contact/cloth_nearby.h)
+  Points candidates_;
+  ClothNearby nearby_;
+  // each triangle's plane at the candidates (triangle_plane), kept while none of its vertices
+  // changes: a stamp counts the passes' starts and the candidates' changes
+  struct TrianglePlane {
+    Vec3 winding = Vec3::Zero();
+    double twice_area = 0.0;
+    long long at = -1;  // the stamp when it was taken
+  };
+  std::vector<TrianglePlane> planes_;      // (ntri)
+  std::vector<long long> vertex_changed_;  // (nvert) the stamp when its candidate last changed
+  long long stamp_ = 0, pass_stamp_ = 0;   // now, and at this pass's start
   std::vector<std::array<int, 3>> triangle_edges_;  // (ntri) each triangle's edges (indices into edges_)
   std::vector<int> triangle_seen_, edge_seen_;  // scratch: the body edge that last looked at each (collide_features)
   int edge_mark_ = -1;                          // the last body edge's mark

@@ -6,9 +6,11 @@
 #include "levelset/signed_distance.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <utility>
@@ -163,7 +165,7 @@ bool pairs_by_grid(const World& w, const std::vector<int>& rank, std::vector<std
   };
   std::vector<int> wide;
   std::vector<std::array<std::int64_t, 3>> cells(n);
-  std::vector<std::pair<std::uint64_t, int>> entries;  // (cube, body), sorted
+  std::vector<std::pair<std::uint64_t, int>> entries;  // (cube, body)
   for (int i = 0; i < n; ++i) {
     if (2.0 * radii[i] > cube) {
       wide.push_back(i);
@@ -176,19 +178,53 @@ bool pairs_by_grid(const World& w, const std::vector<int>& rank, std::vector<std
     entries.push_back({key(cells[i][0], cells[i][1], cells[i][2]), i});
   }
   if (wide.size() > 64) return false;
-  std::sort(entries.begin(), entries.end());
   const auto add = [&](int i, int j) {  // i and j in either order
     if (rank[j] < rank[i]) std::swap(i, j);
     if (spheres_meet(w, i, j)) out.push_back({i, j});
   };
-  for (const auto& [own, i] : entries) {
-    const auto& c = cells[i];
-    for (std::int64_t dx = -1; dx <= 1; ++dx) {
-      for (std::int64_t dy = -1; dy <= 1; ++dy) {
-        const std::uint64_t last = key(c[0] + dx, c[1] + dy, c[2] + 1);
-        auto it = std::lower_bound(entries.begin(), entries.end(), std::make_pair(key(c[0] + dx, c[1] + dy, c[2] - 1), -1));
-        for (; it != entries.end() && it->first <= last; ++it) {
-          if (rank[it->second] > rank[i]) add(i, it->second);
+  // the bodies of each cube, as buckets of a dense block of cubes (with a layer of empty ones
+  // around) when it is small beside the bodies, else as sorted (cube, body) entries
+  std::array<std::int64_t, 3> low{}, size{};
+  low.fill(std::numeric_limits<std::int64_t>::max());
+  size.fill(0);
+  for (const auto& [k, i] : entries) {
+    for (int a = 0; a < 3; ++a) low[a] = std::min(low[a], cells[i][a] - 1);
+  }
+  for (const auto& [k, i] : entries) {
+    for (int a = 0; a < 3; ++a) size[a] = std::max(size[a], cells[i][a] + 2 - low[a]);
+  }
+  const double volume = static_cast<double>(size[0]) * static_cast<double>(size[1]) * static_cast<double>(size[2]);
+  if (!entries.empty() && volume <= 8.0 * n + 64.0) {
+    const auto block = [&](std::int64_t cx, std::int64_t cy, std::int64_t cz) {
+      return ((cx - low[0]) * size[1] + (cy - low[1])) * size[2] + (cz - low[2]);
+    };
+    std::vector<int> starts(static_cast<size_t>(volume) + 1, 0), bodies(entries.size());
+    for (const auto& [k, i] : entries) ++starts[block(cells[i][0], cells[i][1], cells[i][2]) + 1];
+    std::partial_sum(starts.begin(), starts.end(), starts.begin());
+    std::vector<int> fill(starts.begin(), starts.end() - 1);
+    for (const auto& [k, i] : entries) bodies[fill[block(cells[i][0], cells[i][1], cells[i][2])]++] = i;
+    for (const auto& [own, i] : entries) {
+      const auto& c = cells[i];
+      for (std::int64_t dx = -1; dx <= 1; ++dx) {
+        for (std::int64_t dy = -1; dy <= 1; ++dy) {
+          const std::int64_t row = block(c[0] + dx, c[1] + dy, c[2]);
+          for (int s = starts[row - 1]; s < starts[row + 2]; ++s) {
+            if (rank[bodies[s]] > rank[i]) add(i, bodies[s]);
+          }
+        }
+      }
+    }
+  } else {
+    std::sort(entries.begin(), entries.end());
+    for (const auto& [own, i] : entries) {
+      const auto& c = cells[i];
+      for (std::int64_t dx = -1; dx <= 1; ++dx) {
+        for (std::int64_t dy = -1; dy <= 1; ++dy) {
+          const std::uint64_t last = key(c[0] + dx, c[1] + dy, c[2] + 1);
+          auto it = std::lower_bound(entries.begin(), entries.end(), std::make_pair(key(c[0] + dx, c[1] + dy, c[2] - 1), -1));
+          for (; it != entries.end() && it->first <= last; ++it) {
+            if (rank[it->second] > rank[i]) add(i, it->second);
+          }
         }
       }
     }

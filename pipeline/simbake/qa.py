@@ -91,6 +91,7 @@ MAX_SUBSTEPS = 4096           # the core's WorldSettings.max_substeps
 FALLBACKS = ("cloth_held_still", "self_collision_over_budget", "impact_zone_yields", "cloth_let_in", "cloth_gave")
 
 
+_SCALARS = (int, bool, str)    # (_plain's values as they are)
 _SETTINGS = "simbake:settings"  # where the scene's settings go into the sidecar's text
 _MOTION = ("energy_gain", "unexplained_stop", "unexplained_stop_body", "imparted_speed", "imparted_speed_body")
 
@@ -372,6 +373,13 @@ def _show(value: float, unit: str, scale: float) -> str:
 def _plain(value: Any) -> Any:
     """Scene settings as JSON: dataclasses as dicts of their fields (dataclasses.asdict's
     without its deep copies), paths as strings, tuples as lists, non-finite floats as strings."""
+    kind = type(value)
+    if kind is float:
+        return value if math.isfinite(value) else str(value)
+    if kind in _SCALARS or value is None:
+        return value
+    if kind in (list, tuple):
+        return [_plain(v) for v in value]
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, dict):

@@ -54,6 +54,35 @@ def _segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
     return np.linalg.norm(points[:, None, :] - closest, axis=-1)
 
 
+def _any_within(bodies: np.ndarray, origins: np.ndarray, radii: np.ndarray, gap: float) -> np.ndarray:
+    """For each of `bodies`, whether the bounding sphere (origins, radii) of another body is
+    within `gap` of its own: |o_j - o_i| - r_i - r_j <= gap. Pairs come from a grid of cubes
+    as wide as the widest two spheres and the gap (a pair further apart along an axis is
+    further apart than that), each tested as a full matrix of every body would be."""
+    if not len(bodies):
+        return np.zeros(0, dtype=bool)
+    cube = (2.0 * float(radii.max()) + max(gap, 0.0)) * (1.0 + 1e-9) + 1e-9
+    cells = np.floor(origins / cube).astype(np.int64)
+    cells -= cells.min(axis=0)
+    span = cells.max(axis=0) + 3
+    keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    offsets = np.array([(dx * span[1] + dy) * span[2] + dz
+                        for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)])
+    wanted = (keys[bodies][:, None] + offsets[None, :]).ravel()
+    lo = np.searchsorted(sorted_keys, wanted, "left")
+    counts = np.searchsorted(sorted_keys, wanted, "right") - lo
+    rows = np.repeat(np.repeat(np.arange(len(bodies)), len(offsets)), counts)
+    starts = np.repeat(lo - np.concatenate(([0], np.cumsum(counts)[:-1])), counts)
+    cols = order[starts + np.arange(len(rows))]
+    i = bodies[rows]
+    keep = cols != i
+    rows, i, cols = rows[keep], i[keep], cols[keep]
+    ends = np.linalg.norm(origins[cols] - origins[i], axis=-1) - radii[i] - radii[cols]
+    return np.bincount(rows[ends <= gap], minlength=len(bodies)) > 0
+
+
 class MotionFigures:
     """Measures the three figures above frame by frame; `radii` (m) bound each body's mesh
     about its mesh origin, `cloth_masses` are each cloth's lumped vertex masses (kg)."""
@@ -129,34 +158,45 @@ class MotionFigures:
                 "fastest_body": int(np.flatnonzero(self.dynamic)[fastest]) if fastest >= 0 else -1}
 
     def _unexplained_stop(self, world, speeds: np.ndarray, origins: np.ndarray) -> tuple[float, int]:
-        """(speed lost, body index) of the largest stop clear of everything, or (0, -1)."""
+        """(speed lost, body index) of the largest stop clear of everything, or (0, -1); on a
+        tie the first body."""
         if self._speeds is None or not len(speeds):
             return 0.0, -1
         lost = self._speeds - speeds
         stopped = np.flatnonzero((self._speeds >= STOP_SPEED) & (lost > 0.5 * self._speeds))
         if not len(stopped):
             return 0.0, -1
-        index = np.flatnonzero(self.dynamic)
-        worst, who = 0.0, -1
-        for k in stopped:
-            body = int(index[k])
-            if lost[k] > worst and self._clear(world, body, np.asarray(origins, dtype=np.float64)):
-                worst, who = float(lost[k]), body
-        return worst, who
+        origins = np.asarray(origins, dtype=np.float64)
+        bodies = np.flatnonzero(self.dynamic)[stopped]
+        # the quick tests for all at once (most stopped bodies in a pile touch another), then
+        # the rest body by body, the largest loss first (a stable sort: the first on a tie)
+        near = ~self._clear_at_end(bodies, origins)
+        for k in np.argsort(-lost[stopped], kind="stable"):
+            if not near[k] and self._clear_on_path(world, int(bodies[k]), origins):
+                return float(lost[stopped[k]]), int(bodies[k])
+        return 0.0, -1
 
-    def _clear(self, world, body: int, origins: np.ndarray) -> bool:
-        """Whether `body` ends the frame farther than CLEAR_GAP from everything it could touch."""
-        here, r = origins[body:body + 1], self.radii[body]
-        up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
-        if self.ground is not None and float(here[0] @ up) - r - self.ground <= CLEAR_GAP:
-            return False
+    def _clear_at_end(self, bodies: np.ndarray, origins: np.ndarray) -> np.ndarray:
+        """Whether each of `bodies` ends the frame farther than CLEAR_GAP from the ground and
+        from every other body's bounding sphere."""
+        here, r = origins[bodies], self.radii[bodies]
+        clear = np.ones(len(bodies), dtype=bool)
+        if self.ground is not None:
+            up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
+            clear &= np.array([float(p @ up) for p in here]) - r - self.ground > CLEAR_GAP
         if len(origins) > 1:
             # a body within the gap where it ends the frame is within it along its path too
             # (the path's distance is at most the end's; the margin covers round-off)
-            ends = np.linalg.norm(origins - here, axis=1) - r - self.radii
-            ends[body] = np.inf
-            if ends.min() <= CLEAR_GAP - _ROUND_OFF:
-                return False
+            left = np.flatnonzero(clear)
+            clear[left] = ~_any_within(bodies[left], origins, self.radii, CLEAR_GAP - _ROUND_OFF)
+        return clear
+
+    def _clear_on_path(self, world, body: int, origins: np.ndarray) -> bool:
+        """Whether `body`, clear at the end of the frame (_clear_at_end), was farther than
+        CLEAR_GAP from every other body's path over the frame and ends it so from every
+        cloth's bounds."""
+        here, r = origins[body:body + 1], self.radii[body]
+        if len(origins) > 1:
             others = np.delete(np.arange(len(origins)), body)
             gaps = _segment_distance(here, self._origins[others], origins[others])[0] - r - self.radii[others]
             if gaps.min() <= CLEAR_GAP:

@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 
 using namespace simbake;
 
@@ -303,4 +304,53 @@ TEST(BodyFeatures, MeshWedgeEdgeNeverCutsThroughATautSheet) {
   EXPECT_LT(runs[1].middle_y, 0.95);
   EXPECT_EQ(runs[1].crossings, 0);
   EXPECT_GT(runs[0].crossings, 0);
+}
+
+// The triangle grid's two layouts (a dense block of buckets filled by counting, and sorted
+// entries) list the same triangles in the same order for every point, in and around the
+// region; and every triangle whose grown box holds a point of the region is listed for it
+// (the grid's promise, checked by a box test written here). Random sheets of triangles of
+// edge 0.05 and 0.3 m, cells 0.05 m, regions from a few cells to wider than the sheet,
+// shifted by about 2^21 cells so that the wrapped cell names are exercised
+TEST(BodyFeatures, TriangleGridLayoutsListTheSameTriangles) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int trial = 0; trial < 40; ++trial) {
+    const double cell = 0.05, margin = 0.01, size = trial % 2 ? 0.05 : 0.3;
+    const Vec3 offset = trial % 5 == 4 ? Vec3(cell * ((1 << 21) - 3), 0.0, -cell * (1 << 20)) : Vec3::Zero();
+    const int count = 300;
+    Points x(3 * count, 3);
+    Triangles triangles(count, 3);
+    for (int t = 0; t < count; ++t) {
+      const Vec3 corner = offset + Vec3(2.0 * unit(random), 0.5 * unit(random), 2.0 * unit(random));
+      for (int v = 0; v < 3; ++v) {
+        x.row(3 * t + v) = (corner + size * Vec3(unit(random), unit(random), unit(random))).transpose();
+        triangles(t, v) = 3 * t + v;
+      }
+    }
+    const Vec3 centre = offset + Vec3(2.0 * unit(random), 0.25, 2.0 * unit(random));
+    const Vec3 half = Vec3::Constant(0.02 + 1.5 * unit(random));
+    const Box3 region(centre - half, centre + half);
+    TriangleGrid dense, sorted;
+    dense.build(x, triangles, cell, margin, region, nullptr, true);
+    sorted.build(x, triangles, cell, margin, region, nullptr, false);
+    std::vector<int> a, b;
+    for (int q = 0; q < 2000; ++q) {
+      // points in the region and up to two cells around it
+      const Vec3 p = region.min() - Vec3::Constant(2.0 * cell) +
+                     Vec3(unit(random), unit(random), unit(random)).cwiseProduct(region.sizes() + Vec3::Constant(4.0 * cell));
+      dense.query(p, a);
+      sorted.query(p, b);
+      ASSERT_EQ(a, b) << "trial " << trial << " point " << q;
+      EXPECT_TRUE(std::is_sorted(a.begin(), a.end()));
+      if (!region.contains(p)) continue;
+      for (int t = 0; t < count; ++t) {
+        Box3 box;
+        for (int v = 0; v < 3; ++v) box.extend(Vec3(x.row(triangles(t, v)).transpose()));
+        box.min().array() -= margin;
+        box.max().array() += margin;
+        if (box.contains(p)) EXPECT_TRUE(std::binary_search(a.begin(), a.end(), t)) << "trial " << trial;
+      }
+    }
+  }
 }
