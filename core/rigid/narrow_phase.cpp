@@ -226,16 +226,22 @@ bool NarrowPhase::box_pair_contact(int a, int b, double s, double margin, std::v
   const double trusted = kTrustedDepth * std::min(model_.defs[a].thickness, model_.defs[b].thickness);
   // with speculative contacts an edge contact brings the faces behind it: a tilted box
   // landing edge first turns about that edge within the step, and its face would close on
-  // the other box's with no point of the pair there to stop it
+  // the other box's with no point of the pair there to stop it. For the same reason a face
+  // contact keeps every clipped corner of the incident face within a quarter of the thinner
+  // box (the margins' cap), not only those within the margin: the contact stage finds its
+  // points once, and a box pressed from above within the stage (a layer landing on it)
+  // turns about the corners it rests on and sinks its far side, where the pair would have no
+  // point. Such a point is speculative: it only stops the gap closing faster than in a step
+  const double point_reach = margin > 0.0 ? trusted : 0.0;
   BoxContact contact, faces;
-  if (!box_box_contact(box_a, box_b, margin, contact, margin > 0.0 ? &faces : nullptr)) return true;
+  if (!box_box_contact(box_a, box_b, margin, contact, margin > 0.0 ? &faces : nullptr, point_reach)) return true;
   if (contact.depth > trusted) return false;
   for (const BoxContact* c : {&contact, &faces}) {
     const Vec3 normal_b = pose_b.rotation.transpose() * c->normal;
     for (int k = 0; k < c->count; ++k) {
       const double depth = c->points[k].depth;
-      // (touching is not penetrating, as for the samples; within the margin outside: speculative)
-      if (!(depth > kTouching || (margin > 0.0 && depth > -margin))) continue;
+      // (touching is not penetrating, as for the samples; within the reach outside: speculative)
+      if (!(depth > kTouching || (margin > 0.0 && depth > -std::max(margin, point_reach)))) continue;
       const Vec3& on_a = c->points[k].x;
       const Vec3 m = pose_a.apply_inverse(on_a);
       out.push_back({a, b, scratch_.candidate_poses[a].apply(m), c->normal, -depth, m, s, true,
