@@ -351,6 +351,22 @@ void find_pair_penetrations(const RigidModel& model, const RigidData& data, Rigi
   });
 }
 
+namespace {
+
+// p's normal and distance from body b at b's pose, for the point x of a
+void refresh_against(const RigidModel& model, const Pose& pose_b, const Vec3& x, Penetration& p) {
+  if (p.crossing) {  // the two edges' points, carried by their bodies, along the normal
+    p.n = pose_b.rotation * p.normal_b;
+    p.phi = p.n.dot(x - pose_b.apply(p.local_b));
+    return;
+  }
+  Vec3 n_local;
+  p.phi = model.defs[p.b].shape->phi_and_normal(pose_b.apply_inverse(x), n_local);
+  p.n = pose_b.rotation * n_local;
+}
+
+}  // namespace
+
 // Moves a contact's sample with its body's candidate and takes b's normal there
 // (at the fraction of the step where it was found: see the swept test)
 void refresh_contact(const RigidModel& model, const RigidData& data, const RigidScratch& scratch, Penetration& p) {
@@ -359,17 +375,10 @@ void refresh_contact(const RigidModel& model, const RigidData& data, const Rigid
   if (p.b == kGround) {
     p.phi = p.x.y() - model.ground->height;
     p.n = Vec3::UnitY();
+  } else if (p.s >= 1.0) {
+    refresh_against(model, scratch.candidate_poses[p.b], p.x, p);
   } else {
-    const Pose pose_b = pose_at(model, data, scratch, p.b, p.s);
-    const Vec3 x = p.s >= 1.0 ? p.x : pose_at(model, data, scratch, p.a, p.s).apply(m);
-    if (p.crossing) {  // the two edges' points, carried by their bodies, along the normal
-      p.n = pose_b.rotation * p.normal_b;
-      p.phi = p.n.dot(x - pose_b.apply(p.local_b));
-      return;
-    }
-    Vec3 n_local;
-    p.phi = model.defs[p.b].shape->phi_and_normal(pose_b.apply_inverse(x), n_local);
-    p.n = pose_b.rotation * n_local;
+    refresh_against(model, pose_at(model, data, scratch, p.b, p.s), pose_at(model, data, scratch, p.a, p.s).apply(m), p);
   }
 }
 
