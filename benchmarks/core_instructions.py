@@ -26,23 +26,14 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from benchmarks.peers import scenes as peer_scenes
+from benchmarks.peers import pile_bakes
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "assets" / "scenes"
 
 
 def _box1000(end: int) -> str:
-    pile = peer_scenes.build("pile")
-    lines = ["[scene]", "fps = 24", "start_frame = 1", f"end_frame = {end}", "",
-             "[ground]", "height = 0.0", "friction = 0.5", ""]
-    for i, b in enumerate(pile.bodies):
-        lines += ["[[bodies]]", f'name = "box{i:04d}"',
-                  f'shape = {{ type = "box", size = [{b.size[0]}, {b.size[1]}, {b.size[2]}] }}',
-                  f"position = [{', '.join(repr(v) for v in b.position)}]",
-                  f"orientation = [{', '.join(repr(q) for q in b.orientation)}]",
-                  "density = 1000.0", "friction = 0.5", ""]
-    return "\n".join(lines)
+    return pile_bakes.scene_text("pile", fps=24, end_frame=end)
 
 
 def _ranged(text: str, end: int) -> str:

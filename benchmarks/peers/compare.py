@@ -5,12 +5,15 @@
     python3 benchmarks/peers/compare.py --engines simbake mujoco --scenes tower drop
     python3 benchmarks/peers/compare.py --seconds pyramid=5 pile=2 --simbake-pile-seconds 5
     python3 benchmarks/peers/compare.py --scenes pile_meshes --cpu 1   # pile.toml's 200 meshes
+    python3 benchmarks/peers/compare.py --pile-bakes-only --cpu 1      # the piles' whole bakes against MuJoCo
 
 Each engine runs in its own interpreter (simbake: /work/main/.venv; PyBullet and MuJoCo:
 benchmarks/peers/.venv-peers; Blender: benchmarks/peers/.venv-bpy), one subprocess per run,
 pinned to one CPU with OMP/BLAS/TBB threads set to 1; every script times only its stepping.
 Timings are the median of --repeats runs (default 3); a run whose stepping took more than
---slow seconds is not repeated. Writes benchmarks/results/peers.{json,md,png}.
+--slow seconds is not repeated. With simbake, MuJoCo and a 1000-box pile among the scenes,
+the whole `simbake bake` of both piles is also timed against MuJoCo, in turns (pile_bakes.py).
+Writes benchmarks/results/peers.{json,md,png}.
 Needs only the standard library to run; the chart is drawn with the matplotlib of
 .venv-peers (or of the main venv).
 """
@@ -29,6 +32,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import pile_bakes
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -260,6 +265,8 @@ def write_markdown(payload: dict, path: Path) -> None:
               + "; below 1 = faster than real time), then "
               "the accuracy. Frames of 1/24 s; setup, model compilation and pose read-back are outside the clock.", "",
               "Versions: " + ", ".join(f"{LABELS[e]} {payload['versions'].get(e, '-')}" for e in engines) + ".", ""]
+    if payload.get("pile_bakes"):
+        lines += pile_bakes.markdown(payload["pile_bakes"])
     if payload["options"].get("command"):
         lines += [f"Reproduce: `{payload['options']['command']}` (from the repository's root; the peers' venvs "
                   "as in benchmarks/peers/README.md).", ""]
@@ -406,6 +413,34 @@ def write_chart(json_path: Path, png_path: Path) -> str:
     return "no chart: no interpreter with matplotlib"
 
 
+def run_pile_bakes(args, rounds: int, start: float) -> dict:
+    """The piles' whole bakes against MuJoCo (pile_bakes.py), `rounds` rounds in turns."""
+    return pile_bakes.run(args.simbake_python, lambda scene: run_once("mujoco", scene, None, [], args.timeout),
+                          rounds, pinned_cpu(), child_environment(), args.timeout,
+                          lambda line: print(f"[{time.perf_counter() - start:6.0f} s] {line}", flush=True))
+
+
+def bake_piles_only(args) -> None:
+    """--pile-bakes-only: the piles' whole bakes alone, into pile_bakes.{json,md} beside peers.*"""
+    start = time.perf_counter()
+    load_start = list(os.getloadavg())
+    result = run_pile_bakes(args, args.pile_bakes or 3, start)
+    result.update({"machine": machine_info(), "git": git_state(), "load_average_start": load_start,
+                   "load_average_end": list(os.getloadavg()), "seconds": time.perf_counter() - start,
+                   "command": " ".join(["python3", "benchmarks/peers/compare.py"] + sys.argv[1:]),
+                   "simbake_python": str(args.simbake_python)})
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "pile_bakes.json").write_text(json.dumps(finite(result), indent=1) + "\n")
+    info = result["machine"]
+    lines = ["# Whole bakes of the 1000-box piles against MuJoCo", "",
+             f"{info['cpu_model']}, {info['logical_cpus']} vCPU, pinned to CPU {info['pinned_cpu']}; {info['date']}; "
+             f"load average at the start {', '.join(f'{v:.2f}' for v in load_start)}, at the end "
+             f"{', '.join(f'{v:.2f}' for v in result['load_average_end'])}; git {result['git']['head']}.", "",
+             f"Reproduce: `{result['command']}`", ""] + pile_bakes.markdown(result)[1:]
+    (args.out / "pile_bakes.md").write_text("\n".join(lines).rstrip() + "\n")
+    print("\n".join(lines))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--engines", nargs="+", default=list(ENGINES), choices=list(ENGINES))
@@ -431,6 +466,10 @@ def main() -> None:
                          "built from a clean checkout of HEAD while the work tree is being edited")
     ap.add_argument("--note", action="append", default=[],
                     help="a line for the notes of peers.md (e.g. which commit the simbake module was built from)")
+    ap.add_argument("--pile-bakes", type=int, default=None, metavar="ROUNDS",
+                    help="rounds of the piles' whole bakes against MuJoCo (default: --repeats; 0: none)")
+    ap.add_argument("--pile-bakes-only", action="store_true",
+                    help="only the piles' whole bakes against MuJoCo (simbake and MuJoCo, both piles)")
     ap.add_argument("--render-only", type=Path, metavar="PEERS_JSON",
                     help="no runs: rewrite peers.md and peers.png (in --out) from an existing peers.json, "
                          "adding any --note")
@@ -459,6 +498,9 @@ def main() -> None:
         if args.simbake_pile_seconds == 1.0:
             args.simbake_pile_seconds = 0.5
 
+    if args.pile_bakes_only:
+        bake_piles_only(args)
+        return
     start = time.perf_counter()
     load_start = list(os.getloadavg())
     runs = {e: {s: [] for s in args.scenes} for e in args.engines}
@@ -475,6 +517,11 @@ def main() -> None:
                 print(f"[{time.perf_counter() - start:6.0f} s] {engine:8s} {scene:14s} run {rep + 1}: {status}",
                       flush=True)
     results = {e: {s: aggregate(runs[e][s]) for s in args.scenes} for e in args.engines}
+
+    bakes = None
+    rounds = args.pile_bakes if args.pile_bakes is not None else args.repeats
+    if rounds > 0 and {"simbake", "mujoco"} <= set(args.engines) and set(pile_bakes.PILES) & set(args.scenes):
+        bakes = run_pile_bakes(args, rounds, start)
 
     extras = []
     if not args.no_extras:
@@ -519,7 +566,7 @@ def main() -> None:
         "engines": args.engines, "scenes": [s for s in SCENE_ORDER if s in args.scenes],
         "versions": versions, "simbake_modules": modules,
         "load_average_start": load_start, "load_average_end": list(os.getloadavg()),
-        "results": results, "extras": extras, "notes": notes,
+        "results": results, "extras": extras, "notes": notes, "pile_bakes": bakes,
         "raw_runs": runs,
     }
     payload["compare_wall_seconds"] = time.perf_counter() - start

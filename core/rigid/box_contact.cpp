@@ -199,19 +199,21 @@ bool box_edge_contact(const OrientedBox& a, const OrientedBox& b, double margin,
   return true;
 }
 
-bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out, BoxContact* faces) {
+bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out, BoxContact* faces,
+                     double point_reach) {
   AxisSearch axes;
   if (!search_axes(a, b, margin, axes)) return false;
+  point_reach = std::max(point_reach, margin);
   out.count = 0;
   if (axes.edge_preferred()) {
     edge_contact(a, b, axes, out);
     if (faces != nullptr) {
       faces->count = 0;
-      face_contact(a, b, axes, margin, *faces);
+      face_contact(a, b, axes, point_reach, *faces);
     }
     return true;
   }
-  return face_contact(a, b, axes, margin, out);
+  return face_contact(a, b, axes, point_reach, out);
 }
 
 }  // namespace simbake

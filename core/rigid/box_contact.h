@@ -45,12 +45,13 @@ struct BoxContact {
 };
 
 // The contact of box a with box b when they overlap or are apart by less than `margin` (m);
-// false when they are farther apart. Points closer than `margin` outside count (depth < 0).
+// false when they are farther apart. Points of the clipped face closer than `point_reach`
+// outside count (depth < 0; point_reach is at least the margin).
 // With `faces`, an edge-against-edge contact also gives there the contact along the
 // shallowest face axis (the faces behind the edges, which may close within the step);
 // faces->count is 0 otherwise.
 bool box_box_contact(const OrientedBox& a, const OrientedBox& b, double margin, BoxContact& out,
-                     BoxContact* faces = nullptr);
+                     BoxContact* faces = nullptr, double point_reach = 0.0);
 
 // The same when that contact is an edge against an edge; false otherwise, without clipping
 // any face (the narrow phase asks this of every pair of boxes)

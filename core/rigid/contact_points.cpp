@@ -49,11 +49,30 @@ void reduce_to_four(std::vector<Penetration>& points) {
   points.assign(kept, kept + n);
 }
 
+void sort_deepest_first(std::vector<Penetration>& points) {
+  // insertion sort: stable, as std::stable_sort, and a pair has a few dozen points at most
+  // (no buffer to allocate)
+  for (std::size_t k = 1; k < points.size(); ++k) {
+    if (!deeper(points[k], points[k - 1])) continue;
+    Penetration moved = points[k];
+    std::size_t j = k;
+    for (; j > 0 && deeper(moved, points[j - 1]); --j) points[j] = points[j - 1];
+    points[j] = moved;
+  }
+}
+
 // Reduces the points of one pair and direction (deepest first) group by group: a group is
 // every remaining point whose normal is within ~25 degrees of the deepest remaining one's,
 // so points that push different ways (an edge caught on a side face, the two arms of a
 // torus on a post) keep their own representatives
 void reduce_contact_points(std::vector<Penetration>& points) {
+  if (points.empty()) return;
+  // one group (two boxes, a face on the ground: nearly always): reduced where it lies
+  const Vec3 n0 = points.front().n;
+  if (std::all_of(points.begin(), points.end(), [&](const Penetration& p) { return p.n.dot(n0) > 0.9; })) {
+    reduce_to_four(points);
+    return;
+  }
   // (scratch kept per thread: the pairs are reduced in parallel, and a step allocates nothing)
   thread_local std::vector<Penetration> rest, result, group, others;
   rest.clear();

@@ -31,6 +31,9 @@ struct Penetration {
 // Whether l is deeper than r (the order of a pair's points: deepest first)
 inline bool deeper(const Penetration& l, const Penetration& r) { return l.phi < r.phi; }
 
+// Sorts the points deepest first, keeping the order of equally deep ones (as std::stable_sort)
+void sort_deepest_first(std::vector<Penetration>& points);
+
 // Keeps at most four of a group of points that push the same way, `points` sorted deepest
 // first: the deepest, the one farthest from it, the one that spans the largest triangle with
 // those two, and the one farthest outside that triangle. Deterministic: ties go to the earlier

@@ -33,16 +33,23 @@ void find_contacts(const RigidModel& model, const RigidData& data, RigidScratch&
   find_pair_penetrations(model, data, scratch, settings, settings.speculative_contacts, /*reuse=*/true);
   tbb::parallel_for(std::size_t(0), found.size(), [&](std::size_t k) {
     std::vector<Penetration>& points = found[k];
-    const auto split = std::stable_partition(points.begin(), points.end(),
-                                             [&](const Penetration& p) { return p.a == scratch.pairs[k].a; });
+    const int a = scratch.pairs[k].a;
+    // (all of a's, as two boxes' exact contact is: no second list)
+    if (std::all_of(points.begin(), points.end(), [&](const Penetration& p) { return p.a == a; })) {
+      sort_deepest_first(points);
+      reduce_contact_points(points);
+      sort_deepest_first(points);
+      return;
+    }
+    const auto split = std::stable_partition(points.begin(), points.end(), [&](const Penetration& p) { return p.a == a; });
     std::vector<Penetration> reverse(split, points.end());
     points.erase(split, points.end());
     for (std::vector<Penetration>* side : {&points, &reverse}) {
-      std::stable_sort(side->begin(), side->end(), deeper);
+      sort_deepest_first(*side);
       reduce_contact_points(*side);
     }
     points.insert(points.end(), reverse.begin(), reverse.end());
-    std::stable_sort(points.begin(), points.end(), deeper);
+    sort_deepest_first(points);
   });
   scratch.contacts.clear();
   for (std::size_t k = 0; k < found.size(); ++k) {

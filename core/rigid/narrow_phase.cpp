@@ -226,16 +226,22 @@ bool NarrowPhase::box_pair_contact(int a, int b, double s, double margin, std::v
   const double trusted = kTrustedDepth * std::min(model_.defs[a].thickness, model_.defs[b].thickness);
   // with speculative contacts an edge contact brings the faces behind it: a tilted box
   // landing edge first turns about that edge within the step, and its face would close on
-  // the other box's with no point of the pair there to stop it
+  // the other box's with no point of the pair there to stop it. For the same reason a face
+  // contact keeps every clipped corner of the incident face within a quarter of the thinner
+  // box (the margins' cap), not only those within the margin: the contact stage finds its
+  // points once, and a box pressed from above within the stage (a layer landing on it)
+  // turns about the corners it rests on and sinks its far side, where the pair would have no
+  // point. Such a point is speculative: it only stops the gap closing faster than in a step
+  const double point_reach = margin > 0.0 ? trusted : 0.0;
   BoxContact contact, faces;
-  if (!box_box_contact(box_a, box_b, margin, contact, margin > 0.0 ? &faces : nullptr)) return true;
+  if (!box_box_contact(box_a, box_b, margin, contact, margin > 0.0 ? &faces : nullptr, point_reach)) return true;
   if (contact.depth > trusted) return false;
   for (const BoxContact* c : {&contact, &faces}) {
     const Vec3 normal_b = pose_b.rotation.transpose() * c->normal;
     for (int k = 0; k < c->count; ++k) {
       const double depth = c->points[k].depth;
-      // (touching is not penetrating, as for the samples; within the margin outside: speculative)
-      if (!(depth > kTouching || (margin > 0.0 && depth > -margin))) continue;
+      // (touching is not penetrating, as for the samples; within the reach outside: speculative)
+      if (!(depth > kTouching || (margin > 0.0 && depth > -std::max(margin, point_reach)))) continue;
       const Vec3& on_a = c->points[k].x;
       const Vec3 m = pose_a.apply_inverse(on_a);
       out.push_back({a, b, scratch_.candidate_poses[a].apply(m), c->normal, -depth, m, s, true,
@@ -345,6 +351,22 @@ void find_pair_penetrations(const RigidModel& model, const RigidData& data, Rigi
   });
 }
 
+namespace {
+
+// p's normal and distance from body b at b's pose, for the point x of a
+void refresh_against(const RigidModel& model, const Pose& pose_b, const Vec3& x, Penetration& p) {
+  if (p.crossing) {  // the two edges' points, carried by their bodies, along the normal
+    p.n = pose_b.rotation * p.normal_b;
+    p.phi = p.n.dot(x - pose_b.apply(p.local_b));
+    return;
+  }
+  Vec3 n_local;
+  p.phi = model.defs[p.b].shape->phi_and_normal(pose_b.apply_inverse(x), n_local);
+  p.n = pose_b.rotation * n_local;
+}
+
+}  // namespace
+
 // Moves a contact's sample with its body's candidate and takes b's normal there
 // (at the fraction of the step where it was found: see the swept test)
 void refresh_contact(const RigidModel& model, const RigidData& data, const RigidScratch& scratch, Penetration& p) {
@@ -353,17 +375,10 @@ void refresh_contact(const RigidModel& model, const RigidData& data, const Rigid
   if (p.b == kGround) {
     p.phi = p.x.y() - model.ground->height;
     p.n = Vec3::UnitY();
+  } else if (p.s >= 1.0) {
+    refresh_against(model, scratch.candidate_poses[p.b], p.x, p);
   } else {
-    const Pose pose_b = pose_at(model, data, scratch, p.b, p.s);
-    const Vec3 x = p.s >= 1.0 ? p.x : pose_at(model, data, scratch, p.a, p.s).apply(m);
-    if (p.crossing) {  // the two edges' points, carried by their bodies, along the normal
-      p.n = pose_b.rotation * p.normal_b;
-      p.phi = p.n.dot(x - pose_b.apply(p.local_b));
-      return;
-    }
-    Vec3 n_local;
-    p.phi = model.defs[p.b].shape->phi_and_normal(pose_b.apply_inverse(x), n_local);
-    p.n = pose_b.rotation * n_local;
+    refresh_against(model, pose_at(model, data, scratch, p.b, p.s), pose_at(model, data, scratch, p.a, p.s).apply(m), p);
   }
 }
 

@@ -33,8 +33,8 @@ struct ContactPoint {
   std::uint64_t seen_a = ~0ull;   // versions of a and b when last evaluated: while both
   std::uint64_t seen_b = ~0ull;   // stay the same, evaluating again would change nothing
   bool apart = false;             // a speculative contact: outside when the stage began; it
-                                  // neither levels the bodies for shock propagation nor
-                                  // joins them for sleeping
+                                  // does not join its bodies for sleeping nor into the groups
+                                  // shock propagation may send back (it does level them)
 };
 
 // Shock propagation's scratch (rigid/shock_propagation.h)

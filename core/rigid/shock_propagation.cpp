@@ -23,7 +23,11 @@ double fastest_point_speed(const RigidModel& model, const RigidData& data, const
   return data.v[i].norm() + (scratch.inverse_inertia[i] * data.l[i]).norm() * model.defs[i].bounding_radius;
 }
 
-// Levels by breadth-first search; scratch.shock.order lists the connected bodies level by level
+// Levels by breadth-first search; scratch.shock.order lists the connected bodies level by level.
+// Speculative contacts (apart when the stage began) level their bodies too: a box falling onto
+// a stack is held, within the stage, only by its speculative points, and left out of the levels
+// it would keep the sweeps' unconverged velocities while the levels below it change under it
+// (it then closes its gap and goes on into the box below)
 void assign_contact_levels(const RigidModel& model, RigidScratch& scratch) {
   const int n = model.body_count();
   std::fill(scratch.level.begin(), scratch.level.end(), -1);
@@ -36,7 +40,7 @@ void assign_contact_levels(const RigidModel& model, RigidScratch& scratch) {
   auto fixed = [&](int i) { return i == kGround || model.defs[i].kinematic; };
   for (const ContactPoint& c : scratch.contacts) {
     const int a = c.point.a, b = c.point.b;
-    if (c.apart || fixed(a) || fixed(b)) continue;
+    if (fixed(a) || fixed(b)) continue;
     ++start[a + 1];
     ++start[b + 1];
   }
@@ -45,7 +49,6 @@ void assign_contact_levels(const RigidModel& model, RigidScratch& scratch) {
   std::vector<int>& filled = scratch.body_scratch;
   filled.assign(start.begin(), start.end() - 1);
   for (const ContactPoint& c : scratch.contacts) {
-    if (c.apart) continue;
     const int a = c.point.a, b = c.point.b;
     const bool a_fixed = fixed(a), b_fixed = fixed(b);
     if (b_fixed && !a_fixed && scratch.level[a] < 0) { scratch.level[a] = 0; queue.push_back(a); }
