@@ -91,29 +91,47 @@ Eigen::Vector3i DeformingSurface::cell_of(const Vec3& p) const {
   return (p / cell_).array().floor().cast<int>().matrix() - corner_;
 }
 
+// The nearest of the vertices in the 3 x 3 x 3 cells about p's; none there, the nearest of
+// all (p far from the surface), found ring by ring of cells outward: a cell r cells from p's
+// (in the largest of its offsets) is at least r - 1 cells from p, so the search stops at the
+// first ring that cannot hold a vertex as near as the nearest so far (ties: the lower index)
 Vec3 DeformingSurface::velocity_at(const Vec3& p) const {
   int best = -1;
   double nearest = std::numeric_limits<double>::infinity();
   const Eigen::Vector3i c = cell_of(p);
-  for (int dz = -1; dz <= 1; ++dz) {
-    for (int dy = -1; dy <= 1; ++dy) {
-      for (int dx = -1; dx <= 1; ++dx) {
-        const Eigen::Vector3i q = c + Eigen::Vector3i(dx, dy, dz);
-        if ((q.array() < 0).any() || (q.array() >= extent_.array()).any()) continue;
-        const int cell = (q.z() * extent_.y() + q.y()) * extent_.x() + q.x();
-        for (int i = cell_start_[cell]; i < cell_start_[cell + 1]; ++i) {
-          const int k = cell_vertex_[i];
-          const double d = (end_.row(k).transpose() - p).squaredNorm();
-          if (d < nearest || (d == nearest && k < best)) nearest = d, best = k;
+  const auto visit = [&](int x, int y, int z) {
+    const int cell = (z * extent_.y() + y) * extent_.x() + x;
+    for (int i = cell_start_[cell]; i < cell_start_[cell + 1]; ++i) {
+      const int k = cell_vertex_[i];
+      const double d = (end_.row(k).transpose() - p).squaredNorm();
+      if (d < nearest || (d == nearest && k < best)) nearest = d, best = k;
+    }
+  };
+  // the cells of the ring r cells from p's (r = 0: p's own cell), those in the grid
+  const auto ring = [&](int r) {
+    const Eigen::Vector3i lo = (c.array() - r).max(0).matrix(), hi = (c.array() + r).min(extent_.array() - 1).matrix();
+    for (int z = lo.z(); z <= hi.z(); ++z) {
+      for (int y = lo.y(); y <= hi.y(); ++y) {
+        if (std::abs(z - c.z()) == r || std::abs(y - c.y()) == r) {
+          for (int x = lo.x(); x <= hi.x(); ++x) visit(x, y, z);
+        } else {
+          if (c.x() - r >= 0 && c.x() - r < extent_.x()) visit(c.x() - r, y, z);
+          if (r > 0 && c.x() + r >= 0 && c.x() + r < extent_.x()) visit(c.x() + r, y, z);
         }
       }
     }
-  }
-  if (best < 0) {  // far from the surface: the nearest of all
-    for (Eigen::Index k = 0; k < end_.rows(); ++k) {
-      const double d = (end_.row(k).transpose() - p).squaredNorm();
-      if (d < nearest) nearest = d, best = static_cast<int>(k);
-    }
+  };
+  ring(0);
+  ring(1);
+  if (best >= 0) return vertex_velocity(best);
+  // (the rings before `first` and past `last` hold no cell of the grid)
+  const Eigen::Array3i below = -c.array(), above = c.array() - extent_.array() + 1;
+  const int first = std::max(2, below.max(above).max(0).maxCoeff());
+  const int last = below.abs().max(above.abs()).maxCoeff();
+  for (int r = first; r <= last; ++r) {
+    // (a hundredth of a cell's margin for p's cell rounded at its border)
+    if (best >= 0 && std::pow((r - 1.01) * cell_, 2) > nearest) break;
+    ring(r);
   }
   return vertex_velocity(best);
 }

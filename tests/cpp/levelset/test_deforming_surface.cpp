@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 
 namespace simbake {
@@ -66,6 +67,33 @@ TEST(DeformingSurface, MotionOfASwellingMovingSphere) {
   }
   EXPECT_DOUBLE_EQ(surface.reach(c1), reach);
   EXPECT_GT(reach, r1);  // the start's sphere reaches further from the end's centre
+}
+
+// The velocity at a point is its nearest vertex's: near the surface, the nearest within the
+// cells about it; far from it (no vertex in those cells), the nearest of all, against a
+// search of every vertex (ties: the lower index), at points all around and far outside
+TEST(DeformingSurface, VelocityFarFromTheSurfaceIsTheNearestVertexs) {
+  const TriangleMesh sphere = make_sphere_mesh(1.0, 2);
+  const auto shape = std::make_shared<SphereDistance>(1.0);
+  Points start = sphere.vertices * 0.4;
+  Points end = start;
+  for (Eigen::Index k = 0; k < end.rows(); ++k) end.row(k) *= 1.0 + 0.1 * std::sin(3.0 * k);
+  DeformingSurface surface(start, shape, 0.0);
+  surface.set_frame(end, shape, 0.0, 0.1);
+  int far = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const double t = 0.37 * i, radius = 0.45 + 3.0 * (i % 50) / 50.0;
+    const Vec3 p = radius * Vec3(std::cos(t) * std::sin(1.3 * t), std::sin(t) * std::sin(1.3 * t), std::cos(1.3 * t));
+    int best = 0;
+    for (int k = 1; k < surface.vertex_count(); ++k) {
+      if ((surface.vertex(k, 1.0) - p).squaredNorm() < (surface.vertex(best, 1.0) - p).squaredNorm()) best = k;
+    }
+    if (radius > 1.5) {
+      ++far;
+      EXPECT_EQ(surface.velocity_at(p), surface.vertex_velocity(best)) << "at " << p.transpose();
+    }
+  }
+  EXPECT_GT(far, 1000);
 }
 
 }  // namespace
