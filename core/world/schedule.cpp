@@ -69,15 +69,6 @@ class BodySpeeds {
     return thinnest;
   }
 
-  // whether anything can collide: a ground, or a body something can touch
-  bool collidable() const {
-    if (model_.ground) return true;
-    for (const RigidBodyDef& def : model_.defs) {
-      if (def.shape) return true;
-    }
-    return false;
-  }
-
   // the speed (m/s) of body i's fastest point over the frame: its velocities now or, for a
   // keyed body, its track's travel over the frame; gravity's gain over the frame for a dynamic body
   double body_speed(int i) const {
@@ -98,7 +89,7 @@ class BodySpeeds {
   // of the kinematic bodies near that box only (as kinematic_speed_near judges near)
   double body_travel_steps(double thinnest, const Box3* reach = nullptr, double reach_speed = 0.0) const {
     double steps = 1.0;
-    if (!collidable()) return steps;
+    if (!anything_collides(model_)) return steps;
     for (int i = 0; i < model_.body_count(); ++i) {
       if (data_.asleep[i]) continue;
       const RigidBodyDef& def = model_.defs[i];
@@ -107,7 +98,7 @@ class BodySpeeds {
         const double radius = def.bounding_radius + (speed + reach_speed) * frame_dt_;
         if ((data_.x[i].cwiseMax(reach->min()).cwiseMin(reach->max()) - data_.x[i]).norm() > radius) continue;
       }
-      const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * std::max(thinnest, 0.0));
+      const double limit = settings_.travel_fraction * std::min(def.thickness, 2.0 * thinnest);
       steps = std::max(steps, std::ceil(speed * frame_dt_ / limit));
     }
     return steps;
@@ -163,6 +154,11 @@ class BodySpeeds {
 };
 
 }  // namespace
+
+bool anything_collides(const RigidModel& model) {
+  return model.ground || std::any_of(model.defs.begin(), model.defs.end(),
+                                     [](const RigidBodyDef& def) { return def.shape != nullptr; });
+}
 
 double jointed_turn_rate(const RigidModel& model, const RigidData& data) {
   double fastest = 0.0;

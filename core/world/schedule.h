@@ -18,6 +18,10 @@ struct FrameSchedule {
   int cloth_steps = 1;  // 1 with no cloth
 };
 
+// Whether anything in the world can collide: a ground, or a body with a shape (a chain of
+// shapeless links cannot)
+bool anything_collides(const RigidModel& model);
+
 // The fastest turn of an awake jointed dynamic body (rad/s), 0 with none: the automatic
 // substeps keep its turn per substep within WorldSettings::joint_turn
 double jointed_turn_rate(const RigidModel& model, const RigidData& data);

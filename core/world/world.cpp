@@ -194,8 +194,7 @@ void World::step_bodies(double dt) {
   scratch.speculative = settings_.speculative_contacts && cloths_.empty();
   // with no ground and no body something can touch (a chain of shapeless links) nothing
   // collides: no pair, no contact, and the stages that find them have nothing to do
-  const bool collidable = model.ground || std::any_of(model.defs.begin(), model.defs.end(),
-                                                      [](const RigidBodyDef& def) { return def.shape != nullptr; });
+  const bool collidable = anything_collides(model);
   if (collidable) {
     { StageTimer timer(profile_, Stage::kBroadPhase); broad_phase(model, data, scratch, settings_, dt); }
     { StageTimer timer(profile_, Stage::kCollisions); resolve_collisions(model, data, scratch, settings_, dt, stats_.substeps); }
