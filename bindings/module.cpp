@@ -659,6 +659,11 @@ void bind_world_reading(py::class_<World>& world) {
            "Every body's state now, one array each: center_of_mass (n, 3), orientation (n, 4) [w, x, y, z] "
            "of the principal frame, linear_velocity (n, 3), angular_momentum (n, 3), angular_velocity (n, 3), "
            "asleep (n,)")
+      .def("linear_velocities", [](const World& w) {
+             Points v(w.body_count(), 3);
+             for (int i = 0; i < w.body_count(); ++i) v.row(i) = w.rigid_data().v[i].transpose();
+             return v;
+           }, "Every body's linear velocity now (n, 3) (m/s): body_states' without the rest")
       .def("mesh_poses", [](const World& w) {
              Points translations(w.body_count(), 3);
              Quats orientations(w.body_count(), 4);

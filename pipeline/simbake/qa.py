@@ -340,11 +340,7 @@ class QualityRecorder:
         staged = outputs.staged(cache) if outputs is not None else None
         digest = sha256_of(staged if staged is not None else cache)
         data = self.as_dict(cache, profile, digest)
-        # the scene's settings (a line for every body of a pile) on one line: indented JSON is
-        # written by Python's slow encoder, compact JSON by its fast one
-        settings, data["scene"]["settings"] = data["scene"]["settings"], _SETTINGS
-        text = json.dumps(data, indent=1, allow_nan=False)
-        text = text.replace(json.dumps(_SETTINGS), json.dumps(settings, allow_nan=False), 1)
+        text = _dumps(data)
 
         def write(tmp: str) -> None:
             Path(tmp).write_text(text + "\n")
@@ -354,6 +350,27 @@ class QualityRecorder:
         else:
             write_atomically(path, write)
         return path
+
+
+def _dumps(data: dict[str, Any]) -> str:
+    """The sidecar's text: indented down to each figure, whose values per frame (and the
+    scene's settings, a line for every body of a pile) go on one line each. Indented JSON is
+    written by Python's slow encoder, compact JSON by its fast one."""
+    bulky = [(data["scene"], "settings"), (data, "frames"), (data, "time")]
+    bulky += [(data["figures"], name) for name in data["figures"]]
+    bulky += [(figures, name) for figures in data["cloths"].values() for name in figures]
+    values = []
+    for k, (owner, key) in enumerate(bulky):
+        values.append(owner[key])
+        owner[key] = f"{_SETTINGS}:{k}"
+    text = json.dumps(data, indent=1, allow_nan=False)
+    for (owner, key), value in zip(bulky, values):
+        owner[key] = value
+    parts = text.split(f'"{_SETTINGS}:')
+    for k in range(1, len(parts)):
+        index, _, rest = parts[k].partition('"')
+        parts[k] = json.dumps(values[int(index)], allow_nan=False) + rest
+    return "".join(parts)
 
 
 def load_qa(cache_or_sidecar: str | Path) -> dict[str, Any]:
@@ -378,10 +395,13 @@ def _plain(value: Any) -> Any:
         return value if math.isfinite(value) else str(value)
     if kind in _SCALARS or value is None:
         return value
-    if kind in (list, tuple):
+    if kind is list or kind is tuple:
         return [_plain(v) for v in value]
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    names = _FIELDS.get(kind)
+    if names is None and dataclasses.is_dataclass(value) and not isinstance(value, type):
+        names = _FIELDS[kind] = tuple(f.name for f in dataclasses.fields(value))
+    if names is not None:
+        return {name: _plain(getattr(value, name)) for name in names}
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -393,3 +413,6 @@ def _plain(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
     return value
+
+
+_FIELDS: dict[type, tuple[str, ...]] = {}  # (_plain's field names of each dataclass type)

@@ -89,8 +89,10 @@ class MotionFigures:
 
     def __init__(self, scene, masses: np.ndarray, radii: np.ndarray, cloth_masses: list[np.ndarray]):
         self.gravity = np.asarray(scene.gravity, dtype=np.float64)
+        self._g = float(np.linalg.norm(self.gravity))
         self.ground = scene.ground.height if scene.ground is not None else None
         self.dynamic = np.array([not b.kinematic for b in scene.bodies], dtype=bool)
+        self._dynamic = np.flatnonzero(self.dynamic)
         # (a joint drive is a motor: a source too)
         self.has_source = (any(_moving_kinematic(b) for b in scene.bodies)
                            or any(j.drives and j.enabled for j in getattr(scene, "joints", ())))
@@ -109,11 +111,12 @@ class MotionFigures:
     def _rigid(self, world):
         """Velocities, energies and the fastest rim speed of the dynamic bodies now (at the
         start only: later frames take their energies from the core's statistics)."""
-        if not np.any(self.dynamic):
+        if not len(self._dynamic):
             return np.zeros((0, 3)), 0.0, 0.0, 0.0
-        states = world.body_states()
         if self.start_time is not None:
-            return np.asarray(states["linear_velocity"])[self.dynamic], 0.0, 0.0, 0.0
+            v = world.linear_velocities()
+            return (v if len(self._dynamic) == len(v) else v[self._dynamic]), 0.0, 0.0, 0.0
+        states = world.body_states()
         x, v, w = (np.asarray(states[key])[self.dynamic] for key in ("center_of_mass", "linear_velocity", "angular_velocity"))
         spin = np.einsum("ij,ij->i", w, np.asarray(states["angular_momentum"])[self.dynamic])
         m = self.masses[self.dynamic]
@@ -136,7 +139,8 @@ class MotionFigures:
         """The figures of `world` at `time` (s); `origins` (bodies, 3) are the mesh origins;
         `overlapping`: bodies are inside each other deeper than the penetration threshold."""
         velocities, kinetic, potential, fastest = self._rigid(world)
-        speeds = np.linalg.norm(velocities, axis=1)
+        x, y, z = velocities.T
+        speeds = np.sqrt(x * x + y * y + z * z)  # (np.linalg.norm's sum, in its order)
         if self.start_time is None:
             self.start_time = time
             energy = self._start_energy(world, kinetic, potential)
@@ -150,12 +154,12 @@ class MotionFigures:
         self.largest_kinetic = max(self.largest_kinetic, kinetic)
         stop, stopped = self._unexplained_stop(world, speeds, origins)
         self._speeds, self._origins = speeds, np.array(origins, dtype=np.float64)
-        free = self.start_speed + float(np.linalg.norm(self.gravity)) * (time - self.start_time)
+        free = self.start_speed + self._g * (time - self.start_time)
         fastest = int(np.argmax(speeds)) if len(speeds) else -1
         return {"energy_gain": max(0.0, energy - self.start_energy) if self.start_energy is not None else 0.0,
                 "unexplained_stop": stop, "stopped_body": stopped,
                 "imparted_speed": max(0.0, float(speeds.max(initial=0.0)) - free),
-                "fastest_body": int(np.flatnonzero(self.dynamic)[fastest]) if fastest >= 0 else -1}
+                "fastest_body": int(self._dynamic[fastest]) if fastest >= 0 else -1}
 
     def _unexplained_stop(self, world, speeds: np.ndarray, origins: np.ndarray) -> tuple[float, int]:
         """(speed lost, body index) of the largest stop clear of everything, or (0, -1); on a
@@ -183,7 +187,7 @@ class MotionFigures:
         clear = np.ones(len(bodies), dtype=bool)
         if self.ground is not None:
             up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
-            clear &= np.array([float(p @ up) for p in here]) - r - self.ground > CLEAR_GAP
+            clear &= here @ up - r - self.ground > CLEAR_GAP
         if len(origins) > 1:
             # a body within the gap where it ends the frame is within it along its path too
             # (the path's distance is at most the end's; the margin covers round-off)
