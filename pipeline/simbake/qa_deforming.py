@@ -191,17 +191,51 @@ class DeformingPenetration:
         deforming collider at `frame` (m)."""
         k = frame - self.start
         edges = self.edges[cloth]
-        samples = None
-        if edges is not None and len(edges):
-            a, b = points[edges[:, 0]], points[edges[:, 1]]
-            samples = (a[:, None, :] + self.EIGHTHS[None, :, None] * (b - a)[:, None, :]).reshape(-1, 3)
         vertex = edge = 0.0
         for surface in self.surfaces:
             vertices = surface.vertices[min(max(k, 0), len(surface.vertices) - 1)]
-            vertex = max(vertex, penetration(points, vertices, surface.triangles))
-            if samples is not None:
-                edge = max(edge, penetration(samples, vertices, surface.triangles))
+            v, e = self._measure_surface(points, edges, vertices, surface.triangles)
+            vertex, edge = max(vertex, v), max(edge, e)
         return vertex, edge
+
+    def _measure_surface(self, points, edges, vertices, triangles) -> tuple[float, float]:
+        """(deepest vertex, deepest edge point) inside one closed mesh. An edge's points are
+        looked at only where they can be inside: not when both ends are outside and bounds
+        of their distances to the surface add up to more than the edge's length (a point of
+        the edge inside would put a crossing of the surface within its distance along the
+        edge of each end), so the figure is the one of every edge's eighths."""
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        in_box = np.all((points >= lo) & (points <= hi), axis=1)
+        corners = vertices[triangles]
+        inside = np.zeros(len(points), dtype=bool)
+        inside[in_box] = inside_closed(points[in_box], corners)
+        vertex = deepest_distance(points[inside], corners)
+        if edges is None or not len(edges):
+            return vertex, 0.0
+        a, b = points[edges[:, 0]], points[edges[:, 1]]
+        length = np.linalg.norm(b - a, axis=1)
+        # the distance to the mesh's box: at most the distance to its surface
+        box = np.linalg.norm(np.maximum(lo - points, 0) + np.maximum(points - hi, 0), axis=1)
+        ends = edges[inside[edges[:, 0]] | inside[edges[:, 1]]]
+        open_ = ~(inside[edges[:, 0]] | inside[edges[:, 1]])
+        near = open_ & (box[edges[:, 0]] + box[edges[:, 1]] <= length * (1 + 1e-9))
+        if near.any():
+            # no triangle is nearer than its centroid less its radius: a bound of the
+            # distance to the surface from the nearest centroid and the largest radius
+            from scipy.spatial import cKDTree
+
+            centroids = corners.mean(axis=1)
+            radius = float(np.linalg.norm(corners - centroids[:, None, :], axis=-1).max())
+            used = np.unique(edges[near])
+            distance = np.zeros(len(points))
+            distance[used] = np.maximum(cKDTree(centroids).query(points[used])[0] - radius, 0.0)
+            near &= distance[edges[:, 0]] + distance[edges[:, 1]] <= length * (1 + 1e-9)
+        kept = np.concatenate([ends, edges[near]])
+        if not len(kept):
+            return vertex, 0.0
+        a, b = points[kept[:, 0]], points[kept[:, 1]]
+        samples = (a[:, None, :] + self.EIGHTHS[None, :, None] * (b - a)[:, None, :]).reshape(-1, 3)
+        return vertex, penetration(samples, vertices, triangles)
 
     def fold_into(self, cloths: dict, figures: dict, frame: int, world) -> None:
         """The last recorded frame's cloth figures (simbake.qa.QualityRecorder's) raised to

@@ -141,6 +141,39 @@ def test_penetration_of_points_in_a_unit_cube_is_their_depth():
     assert penetration(np.array([[0.0, 0.0, 0.0]]), v, f) == pytest.approx(0.5, abs=1e-12)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_edge_points_looked_at_only_where_they_can_be_inside_give_every_edges_figure(seed):
+    """The QA skips an edge whose two ends are outside and further from the surface, added
+    up, than its length; its figure is still the deepest of every edge's eighths, looked at
+    one by one here, for a crumpled sheet of long and short edges through a cube."""
+    from simbake.qa_deforming import DeformingPenetration
+
+    v, f = _cube()
+    rng = np.random.default_rng(seed)
+    n = 24
+    u, w = np.meshgrid(np.linspace(-1.2, 1.2, n), np.linspace(-1.2, 1.2, n))
+    points = np.stack([u.ravel(), 0.3 * np.sin(3 * u.ravel()) + rng.normal(0, 0.08, n * n), w.ravel()], axis=1)
+    points[rng.choice(n * n, 40, replace=False)] += rng.normal(0, 0.5, (40, 3))  # some long edges
+    quads = np.array([[i * n + j, i * n + j + 1, (i + 1) * n + j] for i in range(n - 1) for j in range(n - 1)]
+                     + [[i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j] for i in range(n - 1) for j in range(n - 1)])
+    edges = np.unique(np.sort(quads[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    measure = DeformingPenetration.__new__(DeformingPenetration)
+    vertex, edge = measure._measure_surface(points, edges, v, f)
+    eighths = _edge_eighths(points, quads)
+    inside = np.all(np.abs(eighths) < 0.5, axis=1)
+    assert inside.any() and (~inside).any()
+    assert edge == pytest.approx(float((0.5 - np.abs(eighths[inside]).max(axis=1)).max()), abs=1e-12)
+    assert edge == penetration(eighths, v, f)
+    assert vertex == penetration(points, v, f)
+    # the edges with both ends outside alone: some of them cut through the cube
+    outside = ~np.all(np.abs(points) < 0.5, axis=1)
+    open_ = edges[outside[edges[:, 0]] & outside[edges[:, 1]]]
+    cut = _edge_eighths(points, np.c_[open_, open_[:, :1]])
+    expected = penetration(cut, v, f)
+    assert expected > 0.04
+    assert measure._measure_surface(points, open_, v, f)[1] == expected
+
+
 def test_the_qa_warns_when_cloth_ends_inside_a_deforming_body(tmp_path, monkeypatch):
     """A solver that ignored the collider's motion (the world kept its first pose: what
     simbake did before) leaves the sheet inside the sphere as it swells (its radius grows by
