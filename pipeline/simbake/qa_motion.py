@@ -36,6 +36,7 @@ ENERGY_FLOOR_SPEED = 0.1     # (m/s) ... and moving at 0.1 m/s: the floor of the
 STOP_SPEED = 1.0             # (m/s): slower bodies stop by friction and sleep
 CLEAR_GAP = 0.1              # (m) between bounding spheres (or to the ground, a cloth's bounds)
 IMPARTED_SPEED = 100.0       # (m/s)
+_FULL_MATRIX = 4096          # pairs: fewer are tested all at once, without the grid
 _ROUND_OFF = 1e-9            # (m): far above the round-off of distances of a scene's size
 
 
@@ -61,6 +62,13 @@ def _any_within(bodies: np.ndarray, origins: np.ndarray, radii: np.ndarray, gap:
     further apart than that), each tested as a full matrix of every body would be."""
     if not len(bodies):
         return np.zeros(0, dtype=bool)
+    if len(bodies) * len(origins) <= _FULL_MATRIX:  # few: every pair, as the grid's would be
+        rows = np.repeat(np.arange(len(bodies)), len(origins))
+        i, cols = bodies[rows], np.tile(np.arange(len(origins)), len(bodies))
+        keep = cols != i
+        rows, i, cols = rows[keep], i[keep], cols[keep]
+        ends = np.linalg.norm(origins[cols] - origins[i], axis=-1) - radii[i] - radii[cols]
+        return np.bincount(rows[ends <= gap], minlength=len(bodies)) > 0
     cube = (2.0 * float(radii.max()) + max(gap, 0.0)) * (1.0 + 1e-9) + 1e-9
     cells = np.floor(origins / cube).astype(np.int64)
     cells -= cells.min(axis=0)
@@ -90,6 +98,7 @@ class MotionFigures:
     def __init__(self, scene, masses: np.ndarray, radii: np.ndarray, cloth_masses: list[np.ndarray]):
         self.gravity = np.asarray(scene.gravity, dtype=np.float64)
         self._g = float(np.linalg.norm(self.gravity))
+        self._up = -self.gravity / self._g if self._g > 0 else np.array([0.0, 1.0, 0.0])
         self.ground = scene.ground.height if scene.ground is not None else None
         self.dynamic = np.array([not b.kinematic for b in scene.bodies], dtype=bool)
         self._dynamic = np.flatnonzero(self.dynamic)
@@ -186,8 +195,7 @@ class MotionFigures:
         here, r = origins[bodies], self.radii[bodies]
         clear = np.ones(len(bodies), dtype=bool)
         if self.ground is not None:
-            up = -self.gravity / np.linalg.norm(self.gravity) if np.any(self.gravity) else np.array([0.0, 1.0, 0.0])
-            clear &= here @ up - r - self.ground > CLEAR_GAP
+            clear &= here @ self._up - r - self.ground > CLEAR_GAP
         if len(origins) > 1:
             # a body within the gap where it ends the frame is within it along its path too
             # (the path's distance is at most the end's; the margin covers round-off)
