@@ -208,7 +208,8 @@ class DeformingPenetration:
         in_box = np.all((points >= lo) & (points <= hi), axis=1)
         corners = vertices[triangles]
         inside = np.zeros(len(points), dtype=bool)
-        inside[in_box] = inside_closed(points[in_box], corners)
+        if in_box.any():
+            inside[in_box] = inside_closed(points[in_box], corners)
         vertex = deepest_distance(points[inside], corners)
         if edges is None or not len(edges):
             return vertex, 0.0

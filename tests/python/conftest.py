@@ -43,6 +43,24 @@ def module_from_file(path: Path):
     return module
 
 
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+
+
+def assert_same_usda(written: str, checked_in: str, name: str) -> None:
+    """A generated .usda the same as the checked-in one: the same text between its numbers,
+    and the numbers equal to float32 round-off (1e-7 absolute, 1e-6 relative: numpy's sin
+    and cos differ in the last bits from one CPU's SIMD path to another's)."""
+    import re
+
+    import numpy as np
+
+    assert re.split(_NUMBER, written) == re.split(_NUMBER, checked_in), name
+    a = np.array(re.findall(_NUMBER, written), dtype=np.float64)
+    b = np.array(re.findall(_NUMBER, checked_in), dtype=np.float64)
+    worst = int(np.argmax(np.abs(a - b) - 1e-6 * np.abs(b)))
+    assert np.allclose(a, b, rtol=1e-6, atol=1e-7), (name, a[worst], b[worst])
+
+
 def bake_error(scene: Path, out: Path, capsys) -> str:
     """`simbake bake scene -o out -q` refused as bad input: exit 2, nothing written, and its
     message, which must be one line (returned stripped, for the caller to check its text)."""
