@@ -18,6 +18,8 @@
 #include <pybind11/stl.h>
 
 #include "checked_triangles.h"  // before any use of Triangles: its own caster (checked)
+#include "geometry/closed_mesh.h"
+#include "math/threads.h"
 #include "geometry/mass_properties.h"
 #include "geometry/mesh.h"
 #include "geometry/triangle_intersection.h"
@@ -218,6 +220,14 @@ void bind_geometry(py::module_& m) {
           return out;
         }, py::arg("vertices"), py::arg("triangles"),
         "Pairs (k, 2), sorted, of triangles that share no vertex and cross each other");
+  m.def("closed_mesh_depth", [](const Points& v, const Triangles& t, const Points& points, const Edges& edges, int threads) {
+          py::gil_scoped_release release;
+          const ClosedMesh mesh(v, t);  // out_of_range (IndexError) for a vertex it does not have
+          const ClosedMeshDepth depth = on_threads(threads, [&] { return closed_mesh_depth(mesh, points, edges); });
+          return std::make_pair(depth.vertex, depth.edge);
+        }, py::arg("vertices"), py::arg("triangles"), py::arg("points"), py::arg("edges"), py::arg("threads") = 0,
+        "(deepest point, deepest edge eighth) inside the closed mesh: distance to its surface (0: none inside), "
+        "on at most `threads` CPUs (0: all)");
   m.def("is_closed", [](const Points& v, const Triangles& t) { return is_closed(to_mesh(v, t)); },
         py::arg("vertices"), py::arg("triangles"));
   m.def("mass_properties", [](const Points& v, const Triangles& t) { return mass_dict(mass_properties(to_mesh(v, t))); },

@@ -155,7 +155,7 @@ def check_shot(shot: str | Path, stage_path: str | Path, scene) -> Report:
     the `--shot` stage `stage_path` of its bake."""
     from pxr import Usd, UsdGeom
 
-    from simbake.qa_deforming import penetration
+    from simbake import _core
 
     source = Usd.Stage.Open(str(shot))
     stage = Usd.Stage.Open(str(stage_path))
@@ -199,7 +199,8 @@ def check_shot(shot: str | Path, stage_path: str | Path, scene) -> Report:
             # cloth inside a deforming collider, and the collider's edges through the cloth
             samples = edge_samples(points, edges)
             for path, vertices in posed.items():
-                depth = penetration(samples, vertices, surfaces[path].triangles) * mpu
+                no_edges = np.zeros((0, 2), dtype=np.int64)
+                depth = _core.closed_mesh_depth(vertices, surfaces[path].triangles, samples, no_edges)[0] * mpu
                 report.note(f"{c.name} inside {path} (mm)", 1e3 * depth, frame)
                 if depth > DEEPEST_INSIDE:
                     report.failures["inside"][key] = round(1e3 * depth, 3)

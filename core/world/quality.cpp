@@ -4,6 +4,10 @@
 #include "rigid/box_contact.h"
 #include "rigid/collision_filter.h"
 #include "levelset/signed_distance.h"
+#include "math/threads.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
@@ -397,12 +401,25 @@ ClothQuality cloth_quality(const World& w, int c) {
       offer(deepest, -w.body_def(b).shape->phi(poses[k].apply_inverse(p)), c, b);
     }
   };
-  for (Eigen::Index k = 0; k < x.rows(); ++k) probe(x.row(k).transpose(), q.vertex_penetration);
-  for (const auto& [i, j] : w.cloth_edges(c)) {
-    const Vec3 a = x.row(i).transpose(), b = x.row(j).transpose();
+  // the points in parallel: each range's first deepest, the earlier range's on a tie, is the
+  // first deepest of all in any split, as in order
+  const auto deepest = [](std::size_t count, auto&& offer_of) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, count, 64), PenetrationFigure{},
+        [&](const tbb::blocked_range<std::size_t>& range, PenetrationFigure d) {
+          for (std::size_t k = range.begin(); k < range.end(); ++k) offer_of(k, d);
+          return d;
+        },
+        [](const PenetrationFigure& l, const PenetrationFigure& r) { return r.depth > l.depth ? r : l; });
+  };
+  q.vertex_penetration =
+      deepest(static_cast<std::size_t>(x.rows()), [&](std::size_t k, PenetrationFigure& d) { probe(x.row(k).transpose(), d); });
+  const auto& edges = w.cloth_edges(c);
+  q.edge_penetration = deepest(edges.size(), [&](std::size_t e, PenetrationFigure& d) {
+    const Vec3 a = x.row(edges[e][0]).transpose(), b = x.row(edges[e][1]).transpose();
     // eighths: finer than the cloth's own edge contacts (quarters), so the figure judges them
-    for (int k = 1; k < 8; ++k) probe(a + (k / 8.0) * (b - a), q.edge_penetration);
-  }
+    for (int k = 1; k < 8; ++k) probe(a + (k / 8.0) * (b - a), d);
+  });
   return q;
 }
 
@@ -439,6 +456,10 @@ void QualityMeter::remember(const World& w) {
 }
 
 FrameQuality QualityMeter::measure(const World& w) {
+  return on_threads(w.settings().threads, [&] { return measure_on_arena(w); });
+}
+
+FrameQuality QualityMeter::measure_on_arena(const World& w) {
   if (!unchanged(w)) {
     extents_.resize(w.body_count());
     for (int i = 0; i < w.body_count(); ++i) {
@@ -458,10 +479,12 @@ FrameQuality QualityMeter::measure(const World& w) {
 }
 
 FrameQuality measure_quality(const World& w) {
-  FrameQuality quality;
-  quality.body_penetration = body_penetration(w);
-  for (int c = 0; c < w.cloth_count(); ++c) quality.cloths.push_back(cloth_quality(w, c));
-  return quality;
+  return on_threads(w.settings().threads, [&] {
+    FrameQuality quality;
+    quality.body_penetration = body_penetration(w);
+    for (int c = 0; c < w.cloth_count(); ++c) quality.cloths.push_back(cloth_quality(w, c));
+    return quality;
+  });
 }
 
 }  // namespace simbake

@@ -73,6 +73,7 @@ class QualityMeter {
   FrameQuality measure(const World& world);
 
  private:
+  FrameQuality measure_on_arena(const World& world);
   bool unchanged(const World& world) const;  // since the body figure was last measured
   void remember(const World& world);
 

@@ -2,6 +2,7 @@
 // solvers' (stages.h lists them with their files).
 #include "world/world.h"
 
+#include "math/threads.h"
 #include "rigid/broad_phase.h"
 #include "rigid/collision_filter.h"
 #include "rigid/collisions.h"
@@ -14,9 +15,6 @@
 #include "rigid/sleeping.h"
 #include "world/cloth_coupling.h"
 #include "world/schedule.h"
-
-#include <tbb/info.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -119,13 +117,9 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   // automatic substeps of a world with joints and no cloth shorten within the frame when a
   // jointed body turns faster than they allow (schedule.cpp)
   const bool replan = substeps == 0 && cloths_.empty() && !rigid_model_.joints.empty();
-  // (more threads than the machine has would only be refused by TBB, with a warning on
-  // stderr: the results are the same bits on any count, so the arena takes what there is)
-  tbb::task_arena arena(settings_.threads > 0 ? std::min(settings_.threads, tbb::info::default_concurrency())
-                                             : tbb::task_arena::automatic);
   bool stopped = false;
   int taken = n;
-  arena.execute([&] {
+  on_threads(settings_.threads, [&] {
     for (int k = 0; k < n && stats_.finite; ++k) {
       // (asked between substeps: a signal ends a long frame within a substep; the state after
       // each substep is the same whether or not anyone asks)
@@ -161,7 +155,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   if (stopped) return taken;
   {
     StageTimer timer(profile_, Stage::kStatistics);
-    arena.execute([&] { gather_statistics(rigid_model_, rigid_data_, rigid_scratch_.pairs, cloths_, settings_, stats_); });
+    on_threads(settings_.threads, [&] { gather_statistics(rigid_model_, rigid_data_, rigid_scratch_.pairs, cloths_, settings_, stats_); });
   }
   return n;
 }

@@ -23,7 +23,7 @@ import numpy as np
 
 from .rotations import quat_matrix
 
-_PAIRS = 1 << 20  # point-triangle pairs per numpy block
+_NEAREST = 16  # triangles whose distance bounds a point's nearest
 
 
 def has_attachments(scene) -> bool:
@@ -78,25 +78,42 @@ def triangle_frames(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.stack([e1, np.cross(n, e1), n], axis=-1)
 
 
+def _squared_distances(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Squared distance from each point points[k] to the triangle corners[k] (both (n, ...))."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    w = closest_on_triangles(points, a, b, c)
+    d = points - (w[:, :1] * a + w[:, 1:2] * b + w[:, 2:] * c)
+    return np.einsum("ij,ij->i", d, d)
+
+
+def _nearest_triangles(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Each point's nearest triangle (the first of the nearest by index). Only the triangles
+    whose centroid is within the point's distance to its _NEAREST nearest centroids' triangles
+    plus the largest triangle's radius can be nearer, so only those are compared."""
+    from scipy.spatial import cKDTree
+
+    centroids = corners.mean(axis=1)
+    radius = float(np.linalg.norm(corners - centroids[:, None, :], axis=-1).max())
+    tree = cKDTree(centroids)
+    k = min(_NEAREST, len(corners))
+    near = tree.query(points, k=k)[1].reshape(len(points), k)
+    squared = _squared_distances(np.repeat(points, k, axis=0), corners[near.reshape(-1)])
+    bound = np.sqrt(squared.reshape(len(points), k).min(axis=1))
+    found = tree.query_ball_point(points, bound * (1 + 1e-9) + radius * (1 + 1e-9) + 1e-12)
+    which = np.empty(len(points), dtype=np.int64)
+    for i, tri in enumerate(found):
+        tri = np.sort(np.asarray(tri, dtype=np.int64))
+        which[i] = tri[np.argmin(_squared_distances(np.broadcast_to(points[i], (len(tri), 3)), corners[tri]))]
+    return which
+
+
 def bind_to_mesh(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray):
     """Each point's nearest triangle of the mesh (the first of the nearest), the barycentric
     weights of its nearest point there, and its offset from that point in the triangle's frame."""
     corners = vertices[triangles]
     areas = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     usable = np.flatnonzero(areas > 0)
-    best = np.full(len(points), np.inf)
-    which = np.zeros(len(points), dtype=np.int64)
-    step = max(1, _PAIRS // max(1, len(usable)))
-    for s in range(0, len(points), step):
-        p = points[s:s + step]
-        i = np.repeat(np.arange(len(p)), len(usable))
-        t = np.tile(usable, len(p))
-        a, b, c = corners[t, 0], corners[t, 1], corners[t, 2]
-        w = closest_on_triangles(p[i], a, b, c)
-        near = w[:, :1] * a + w[:, 1:2] * b + w[:, 2:] * c
-        d = np.einsum("ij,ij->i", p[i] - near, p[i] - near).reshape(len(p), len(usable))
-        k = np.argmin(d, axis=1)
-        best[s:s + step], which[s:s + step] = d[np.arange(len(p)), k], usable[k]
+    which = usable[_nearest_triangles(points, corners[usable])]
     a, b, c = corners[which, 0], corners[which, 1], corners[which, 2]
     weights = closest_on_triangles(points, a, b, c)
     near = weights[:, :1] * a + weights[:, 1:2] * b + weights[:, 2:] * c

@@ -19,7 +19,7 @@ import pytest
 
 import simbake
 from conftest import bake_error, module_from_file
-from simbake.qa_deforming import penetration
+from mesh_reference import penetration
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt  # noqa: E402
@@ -100,6 +100,29 @@ def test_a_cape_rides_the_swaying_sphere(tmp_path, skinned):
     assert max(qa["cloths"]["Cape"]["attachment_drift"]) <= 1e-5
     assert max(qa["figures"]["cloth_self_intersections"]) == 0
     assert not stats.warnings, stats.warnings
+
+
+def test_the_qas_binding_is_to_the_first_nearest_of_every_triangle():
+    """The QA binds an attached point to the first (by index) of its nearest triangles,
+    comparing only those that can be nearest; the same triangles as comparing every one, for
+    points on the sphere's vertices (nearest several triangles at once) and off its surface."""
+    from simbake.qa_attachments import bind_to_mesh, closest_on_triangles
+
+    from simbake import _core
+
+    sphere = _core.sphere_mesh(1.0, 16)
+    v, f = np.asarray(sphere[0], dtype=np.float64), np.asarray(sphere[1])
+    rng = np.random.default_rng(2)
+    points = np.concatenate([v[rng.integers(0, len(v), 100)], v[rng.integers(0, len(v), 200)]
+                             + rng.normal(0, 0.05, (200, 3))])
+    corners = v[f]
+    expected = []
+    for p in points:
+        q = np.broadcast_to(p, (len(f), 3))
+        w = closest_on_triangles(q, corners[:, 0], corners[:, 1], corners[:, 2])
+        d = q - (w[:, :1] * corners[:, 0] + w[:, 1:2] * corners[:, 1] + w[:, 2:] * corners[:, 2])
+        expected.append(np.argmin(np.einsum("ij,ij->i", d, d)))
+    np.testing.assert_array_equal(bind_to_mesh(points, v, f)[0], expected)
 
 
 def test_the_qa_warns_when_attached_points_leave_their_body(tmp_path, monkeypatch):

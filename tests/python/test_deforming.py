@@ -17,7 +17,7 @@ import pytest
 import simbake
 from conftest import module_from_file
 from simbake.cli import main
-from simbake.qa_deforming import deepest_distance, inside_closed, penetration
+from mesh_reference import deepest_distance, inside_closed, penetration
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom, Vt  # noqa: E402
@@ -142,11 +142,12 @@ def test_penetration_of_points_in_a_unit_cube_is_their_depth():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_edge_points_looked_at_only_where_they_can_be_inside_give_every_edges_figure(seed):
-    """The QA skips an edge whose two ends are outside and further from the surface, added
-    up, than its length; its figure is still the deepest of every edge's eighths, looked at
-    one by one here, for a crumpled sheet of long and short edges through a cube."""
-    from simbake.qa_deforming import DeformingPenetration
+def test_the_cores_measure_is_the_deepest_vertex_and_edge_eighth_inside(seed):
+    """The QA's measure (the core's closed_mesh_depth) for a crumpled sheet of long and short
+    edges through a cube: the deepest vertex and edge eighth inside, each eighth looked at one
+    by one against the cube's exact depth and the numpy reference; the edges whose two ends
+    are outside alone too (some of them cut through the cube)."""
+    from simbake import _core
 
     v, f = _cube()
     rng = np.random.default_rng(seed)
@@ -157,21 +158,18 @@ def test_edge_points_looked_at_only_where_they_can_be_inside_give_every_edges_fi
     quads = np.array([[i * n + j, i * n + j + 1, (i + 1) * n + j] for i in range(n - 1) for j in range(n - 1)]
                      + [[i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j] for i in range(n - 1) for j in range(n - 1)])
     edges = np.unique(np.sort(quads[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-    measure = DeformingPenetration.__new__(DeformingPenetration)
-    vertex, edge = measure._measure_surface(points, edges, v, f)
+    vertex, edge = _core.closed_mesh_depth(v, f, points, edges)
     eighths = _edge_eighths(points, quads)
     inside = np.all(np.abs(eighths) < 0.5, axis=1)
     assert inside.any() and (~inside).any()
     assert edge == pytest.approx(float((0.5 - np.abs(eighths[inside]).max(axis=1)).max()), abs=1e-12)
-    assert edge == penetration(eighths, v, f)
-    assert vertex == penetration(points, v, f)
-    # the edges with both ends outside alone: some of them cut through the cube
+    assert edge == pytest.approx(penetration(eighths, v, f), abs=1e-12)
+    assert vertex == pytest.approx(penetration(points, v, f), abs=1e-12)
     outside = ~np.all(np.abs(points) < 0.5, axis=1)
     open_ = edges[outside[edges[:, 0]] & outside[edges[:, 1]]]
-    cut = _edge_eighths(points, np.c_[open_, open_[:, :1]])
-    expected = penetration(cut, v, f)
+    expected = penetration(_edge_eighths(points, np.c_[open_, open_[:, :1]]), v, f)
     assert expected > 0.04
-    assert measure._measure_surface(points, open_, v, f)[1] == expected
+    assert _core.closed_mesh_depth(v, f, points, open_)[1] == pytest.approx(expected, abs=1e-12)
 
 
 def test_the_qa_warns_when_cloth_ends_inside_a_deforming_body(tmp_path, monkeypatch):

@@ -18,7 +18,7 @@ import pytest
 import simbake
 from conftest import bake_error, module_from_file
 from simbake.cli import main
-from simbake.qa_deforming import penetration
+from mesh_reference import penetration
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom  # noqa: E402
