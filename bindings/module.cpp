@@ -694,7 +694,8 @@ void bind_world_reading(py::class_<World>& world) {
       .def("cloth_max_strain", [](const World& w, long long i) {
              return w.cloth(checked_index(i, w.cloth_count(), "cloth")).max_strain();
            }, py::arg("index"))
-      .def("statistics", [](const World& w) { return statistics_dict(w.statistics()); })
+      .def("statistics", [](const World& w, bool penetrations) { return statistics_dict(w.statistics(penetrations)); },
+           py::arg("penetrations") = true, "The world's statistics; penetrations=False leaves the penetration figures NaN")
       .def("quality", [](const World& w) {
              FrameQuality q;
              {

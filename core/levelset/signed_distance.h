@@ -8,6 +8,7 @@
 
 #include "math/types.h"
 
+#include <algorithm>
 #include <limits>
 #include <memory>
 
@@ -20,6 +21,8 @@ class SignedDistance {
   virtual double phi(const Vec3& p) const = 0;
   // phi(p) and the unit outward normal at p; the normal is always a unit vector
   virtual double phi_and_normal(const Vec3& p, Vec3& normal) const = 0;
+  // no two points' phi differ by more than this times their distance (1 for a distance)
+  virtual double lipschitz() const { return 1.0; }
   // box that contains the whole zero level set (the solid)
   virtual Box3 bounds() const = 0;
   // how far outside the surface phi and the normal are still the distance and its gradient
@@ -80,6 +83,7 @@ class BlendedDistance final : public SignedDistance {
   double phi_and_normal(const Vec3& p, Vec3& normal) const override;
   Box3 bounds() const override;  // both surfaces'
   double exterior_reach() const override;
+  double lipschitz() const override { return std::max(start_->lipschitz(), end_->lipschitz()); }
   double blend() const { return s_; }
 
  private:

@@ -89,6 +89,8 @@ struct VdbLevelSet::Impl {
   Box3 active_box;  // world box of the active voxel centres
   Vec3 centre;      // its centre: origin of the fallback normal
   double band = 0;  // background value: the exterior band width (m)
+  std::once_flag lipschitz_once;
+  double lipschitz = 0.0;
 
   explicit Impl(FloatGrid::ConstPtr g) : grid(std::move(g)) {
     tree = &grid->tree();
@@ -271,6 +273,40 @@ std::map<std::string, std::string> VdbLevelSet::metadata() const {
 
 double VdbLevelSet::phi(const Vec3& p) const {
   return interpolate(fetch_cell(*impl_->tree, *impl_->xform, p));
+}
+
+double VdbLevelSet::lipschitz() const {
+  std::call_once(impl_->lipschitz_once, [this] {
+    QueryAccessor acc(*impl_->tree);
+    double steepest = 0.0;  // (index space: per voxel)
+    for (auto leaf = impl_->tree->cbeginLeaf(); leaf; ++leaf) {
+      const openvdb::CoordBBox inside = leaf->getNodeBoundingBox();
+      for (auto v = leaf->cbeginValueAll(); v; ++v) {
+        // the cells with this voxel as a corner: the one it is the low corner of, and those
+        // reaching out of the leaf below it (the others are another voxel's of the leaf)
+        for (int o = 0; o < 8; ++o) {
+          const Coord low = v.getCoord() - Coord(o & 1, (o >> 1) & 1, (o >> 2) & 1);
+          if (o != 0 && inside.isInside(low)) continue;
+          float c[2][2][2];
+          openvdb::tools::BoxSampler::getValues(c, acc, low);
+          // the gradient at corner (i, j, k) is its three edges' differences, and anywhere in
+          // the cell the corners' gradients blended by the trilinear weights
+          for (int i = 0; i < 2; ++i) {
+            for (int j = 0; j < 2; ++j) {
+              for (int k = 0; k < 2; ++k) {
+                const double gx = static_cast<double>(c[1][j][k]) - c[0][j][k];
+                const double gy = static_cast<double>(c[i][1][k]) - c[i][0][k];
+                const double gz = static_cast<double>(c[i][j][1]) - c[i][j][0];
+                steepest = std::max(steepest, std::sqrt(gx * gx + gy * gy + gz * gz));
+              }
+            }
+          }
+        }
+      }
+    }
+    impl_->lipschitz = std::max(1.0, steepest / voxel_size()) * (1.0 + 1e-6);
+  });
+  return impl_->lipschitz;
 }
 
 double VdbLevelSet::phi_and_normal(const Vec3& p, Vec3& normal) const {

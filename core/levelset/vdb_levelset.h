@@ -43,6 +43,12 @@ class VdbLevelSet final : public SignedDistance {
   double phi(const Vec3& p) const override;
   // trilinear phi and the normalized gradient of the trilinear interpolant
   double phi_and_normal(const Vec3& p, Vec3& normal) const override;
+  // of the trilinear interpolant: in a cell its gradient is the blend, by the trilinear
+  // weights, of its gradients at the corners (each the three differences along the corner's
+  // edges), so at most the steepest corner's over the voxel size; over every cell that has a
+  // voxel of the tree's leaves as a corner (tiles are constant and meet only tiles of their
+  // own sign; found on the first call)
+  double lipschitz() const override;
   // box containing the zero level set (the active voxels shrunk by the band less one voxel)
   Box3 bounds() const override;
   double exterior_reach() const override;

@@ -7,6 +7,7 @@
 #include "math/threads.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
@@ -42,6 +43,31 @@ void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses
   // two boxes: also edges crossing between the samples (the separating axes' depth)
   OrientedBox box_a, box_b;
   if (oriented_box(w.body_def(a).shape.get(), poses[a], box_a) && oriented_box(def_b.shape.get(), poses[b], box_b)) {
+    offer(deepest, box_overlap_depth(box_a, box_b), a, b);
+  }
+}
+
+// samples_inside a block of samples at a time (rigid_body.h): a block whose sphere misses b's
+// bounds is passed over, its samples' points would all fail bounds.contains; the same depths
+// of the same samples
+void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses, PenetrationFigure& deepest) {
+  const RigidBodyDef& def_b = w.body_def(b);
+  if (!def_b.shape) return;
+  const Box3 bounds = def_b.shape->bounds();
+  const RigidBodyDef& def_a = w.body_def(a);
+  for (size_t k = 0; k < def_a.sample_blocks.size(); ++k) {
+    const Vec3 c = poses[b].apply_inverse(poses[a].apply(def_a.sample_blocks[k].centre));
+    const double gap = (c.cwiseMax(bounds.min()).cwiseMin(bounds.max()) - c).norm();
+    if (gap > SampleBlock::slackened(c, def_a.sample_blocks[k].margin)) continue;
+    const Eigen::Index first = static_cast<Eigen::Index>(k) * SampleBlock::kSize;
+    const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, def_a.samples.rows());
+    for (Eigen::Index s = first; s < end; ++s) {
+      const Vec3 p = poses[b].apply_inverse(poses[a].apply(def_a.samples.row(s).transpose()));
+      if (bounds.contains(p)) offer(deepest, -def_b.shape->phi(p), a, b);
+    }
+  }
+  OrientedBox box_a, box_b;
+  if (oriented_box(def_a.shape.get(), poses[a], box_a) && oriented_box(def_b.shape.get(), poses[b], box_b)) {
     offer(deepest, box_overlap_depth(box_a, box_b), a, b);
   }
 }
@@ -272,6 +298,96 @@ std::vector<Candidate> candidates(const World& w, const std::vector<BodyReach>& 
   return out;
 }
 
+std::uint64_t memo_key(const Candidate& c) {
+  const auto lower = static_cast<std::uint32_t>(c.b < 0 ? c.a : std::min(c.a, c.b));
+  const auto higher = c.b < 0 ? ~std::uint32_t{0} : static_cast<std::uint32_t>(std::max(c.a, c.b));
+  return (static_cast<std::uint64_t>(lower) << 32) | higher;
+}
+
+bool same_pose(const Pose& p, const Pose& q) {
+  return std::memcmp(p.rotation.data(), q.rotation.data(), 9 * sizeof(double)) == 0 &&
+         std::memcmp(p.translation.data(), q.translation.data(), 3 * sizeof(double)) == 0;
+}
+
+// The shapes and samples of the candidate's bodies those it was measured with
+void shapes_of(const World& w, int a, int b, const void* out[4]) {
+  out[0] = w.body_def(a).shape.get();
+  out[1] = w.body_def(a).samples.data();
+  out[2] = b < 0 ? nullptr : w.body_def(b).shape.get();
+  out[3] = b < 0 ? nullptr : w.body_def(b).samples.data();
+}
+
+bool same_shapes(const World& w, const Candidate& c, const DepthMemo::Known& known) {
+  const void* now[4];
+  shapes_of(w, known.a, known.b, now);
+  return std::memcmp(now, known.shapes, sizeof now) == 0;
+}
+
+// Body a's pose in body b's frame (b's pose the identity: in the world)
+Pose relative(const Pose& a, const Pose& b) {
+  return Pose{b.rotation.transpose() * a.rotation, b.rotation.transpose() * (a.translation - b.translation)};
+}
+
+// How far a point within `reach` of the origin moves between two poses (m):
+// |(R1 - R0) s + t1 - t0| <= ||R1 - R0||_F |s| + |t1 - t0|
+double moved(const Pose& from, const Pose& to, double reach) {
+  return (to.rotation - from.rotation).norm() * reach + (to.translation - from.translation).norm();
+}
+
+// The depth a candidate measured before can have now at most (INFINITY: no bound): each
+// sample of one body can have moved only so far through the other's field, whose phi changes
+// by at most its Lipschitz constant per metre (a sample outside the other's bounds then had
+// phi >= 0). Two boxes' separating-axis depth is not bounded so: none for them.
+double motion_bound(const World& w, const Candidate& c, const DepthMemo::Known& known,
+                    const std::vector<BodyReach>& reach, const std::vector<Pose>& poses) {
+  const RigidBodyDef& def_a = w.body_def(c.a);
+  const bool same = known.a == c.a && known.b == c.b;  // (else the poses are the other way round)
+  const Pose& then_a = same ? known.pose_a : known.pose_b;
+  const Pose& then_b = same ? known.pose_b : known.pose_a;
+  if (!same_shapes(w, c, known)) return INFINITY;
+  if (!reach[c.a].finite || (c.b >= 0 && !reach[c.b].finite)) return INFINITY;
+  double motion = 0.0;
+  if (c.b < 0) {
+    motion = moved(then_a, poses[c.a], reach[c.a].extent.samples);
+  } else {
+    if (reach[c.a].extent.is_box && reach[c.b].extent.is_box) return INFINITY;
+    const RigidBodyDef& def_b = w.body_def(c.b);
+    if (def_b.shape) {
+      motion = def_b.shape->lipschitz() * moved(relative(then_a, then_b), relative(poses[c.a], poses[c.b]),
+                                                reach[c.a].extent.samples);
+    }
+    if (def_a.shape) {
+      motion = std::max(motion, def_a.shape->lipschitz() * moved(relative(then_b, then_a), relative(poses[c.b], poses[c.a]),
+                                                                 reach[c.b].extent.samples));
+    }
+  }
+  return known.depth.depth + motion * (1.0 + 1e-9) + kBoundSlack;
+}
+
+// candidate_depth a block of samples at a time: a block that cannot hold a depth above the
+// deepest so far is passed over (its samples would not replace it: the same figure)
+PenetrationFigure candidate_depth_by_blocks(const World& w, const Candidate& c, const std::vector<Pose>& poses) {
+  PenetrationFigure deepest;
+  if (c.b < 0) {
+    const double height = w.ground()->height;
+    const RigidBodyDef& def = w.body_def(c.a);
+    for (size_t k = 0; k < def.sample_blocks.size(); ++k) {
+      const Vec3 centre = poses[c.a].apply(def.sample_blocks[k].centre);
+      const double lowest = centre.y() - SampleBlock::slackened(centre, def.sample_blocks[k].margin);
+      if (!(height - lowest > deepest.depth)) continue;
+      const Eigen::Index first = static_cast<Eigen::Index>(k) * SampleBlock::kSize;
+      const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, def.samples.rows());
+      for (Eigen::Index s = first; s < end; ++s) {
+        offer(deepest, height - poses[c.a].apply(def.samples.row(s).transpose()).y(), c.a, -1);
+      }
+    }
+    return deepest;
+  }
+  blocks_inside(w, c.a, c.b, poses, deepest);
+  blocks_inside(w, c.b, c.a, poses, deepest);
+  return deepest;
+}
+
 // The deepest of one candidate's depths, first on a tie, as the figure's loops offer them
 PenetrationFigure candidate_depth(const World& w, const Candidate& c, const std::vector<Pose>& poses) {
   PenetrationFigure deepest;
@@ -336,7 +452,7 @@ PenetrationFigure body_penetration_every_sample(const World& w) {
 // later candidate can be deeper (nor tie: a tie goes to the candidate first in the figure's
 // order, so a candidate whose bound equals the deepest is still measured, and the first of
 // the deepest is kept whatever the order they were measured in)
-PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>& extents) {
+PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>& extents, DepthMemo* memo) {
   const int n = w.body_count();
   std::vector<BodyReach> reach(n);
   std::vector<Pose> poses(n);
@@ -348,22 +464,71 @@ PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>
   // the candidates that may hold a depth (> 0), as a heap by bound: every candidate whose
   // bound is not below the final deepest depth is measured, in whatever order they come
   std::vector<std::pair<double, int>> heap;
+  std::vector<const DepthMemo::Known*> known(all.size(), nullptr);
   for (int k = 0; k < static_cast<int>(all.size()); ++k) {
-    const double bound = std::isnan(all[k].bound) ? INFINITY : all[k].bound;
+    double bound = std::isnan(all[k].bound) ? INFINITY : all[k].bound;
+    if (memo) {
+      const auto found = memo->last.find(memo_key(all[k]));
+      if (found != memo->last.end()) {
+        known[k] = &found->second;
+        bound = std::min(bound, motion_bound(w, all[k], found->second, reach, poses));
+      }
+    }
     if (bound > 0.0) heap.push_back({bound, k});
   }
   std::make_heap(heap.begin(), heap.end());
+  // in batches (each twice the last) measured in parallel, then offered in turn: the deepest
+  // and the first of the deepest do not depend on the order, and a candidate measured past
+  // the point a lone loop would stop holds no depth above the final one
   PenetrationFigure deepest;
   std::uint64_t first = 0;  // the place of the candidate that gave `deepest`
-  while (!heap.empty() && !(heap.front().first < deepest.depth)) {
-    const int k = heap.front().second;
-    std::pop_heap(heap.begin(), heap.end());
-    heap.pop_back();
-    const PenetrationFigure d = candidate_depth(w, all[k], poses);
-    if (d.depth > deepest.depth || (d.a >= 0 && d.depth == deepest.depth && all[k].order < first)) {
-      deepest = d;
-      first = all[k].order;
+  std::vector<int> batch;
+  std::vector<PenetrationFigure> depths;
+  for (std::size_t size = 16; !heap.empty() && !(heap.front().first < deepest.depth); size *= 2) {
+    batch.clear();
+    while (!heap.empty() && batch.size() < size && !(heap.front().first < deepest.depth)) {
+      batch.push_back(heap.front().second);
+      std::pop_heap(heap.begin(), heap.end());
+      heap.pop_back();
     }
+    depths.assign(batch.size(), PenetrationFigure{});
+    tbb::parallel_for(std::size_t{0}, batch.size(), [&](std::size_t t) {
+      const Candidate& c = all[batch[t]];
+      const DepthMemo::Known* k = known[batch[t]];
+      // (the same bodies where they were, in the same order: the same figure)
+      if (k && k->a == c.a && k->b == c.b && same_pose(k->pose_a, poses[c.a]) &&
+          (c.b < 0 || same_pose(k->pose_b, poses[c.b])) && same_shapes(w, c, *k)) {
+        depths[t] = k->depth;
+        return;
+      }
+      depths[t] = candidate_depth_by_blocks(w, c, poses);
+    });
+    for (std::size_t t = 0; t < batch.size(); ++t) {
+      const PenetrationFigure& d = depths[t];
+      if (memo) {
+        const Candidate& c = all[batch[t]];
+        DepthMemo::Known& k = memo->next[memo_key(c)];
+        k.depth = d;
+        k.a = c.a;
+        k.b = c.b;
+        k.pose_a = poses[c.a];
+        k.pose_b = c.b < 0 ? Pose{} : poses[c.b];
+        shapes_of(w, c.a, c.b, k.shapes);
+      }
+      const std::uint64_t order = all[batch[t]].order;
+      if (d.depth > deepest.depth || (d.a >= 0 && d.depth == deepest.depth && order < first)) {
+        deepest = d;
+        first = order;
+      }
+    }
+  }
+  if (memo) {
+    // (a candidate passed over keeps what was measured of it, from the poses it was measured at)
+    for (size_t k = 0; k < all.size(); ++k) {
+      if (known[k]) memo->next.emplace(memo_key(all[k]), *known[k]);
+    }
+    std::swap(memo->last, memo->next);
+    memo->next.clear();
   }
   return deepest;
 }
@@ -423,9 +588,14 @@ ClothQuality cloth_quality(const World& w, int c) {
   return q;
 }
 
-bool QualityMeter::unchanged(const World& w) const {
+bool QualityMeter::unchanged(const World& w) {
   const int n = w.body_count();
-  if (!measured_ || static_cast<int>(poses_.size()) != 7 * n) return false;
+  const double ground = w.ground() ? w.ground()->height : NAN;
+  // (another ground, or other bodies: no depth measured before holds)
+  if (!measured_ || static_cast<int>(poses_.size()) != 7 * n || std::memcmp(&ground, &ground_, sizeof ground) != 0) {
+    memo_.last.clear();
+    return false;
+  }
   for (int i = 0; i < n; ++i) {
     const RigidBodyDef& def = w.body_def(i);
     if (shapes_[2 * i] != def.shape.get() || shapes_[2 * i + 1] != def.samples.data()) return false;
@@ -434,8 +604,7 @@ bool QualityMeter::unchanged(const World& w) const {
     const double now[7] = {x.x(), x.y(), x.z(), q.w(), q.x(), q.y(), q.z()};
     if (std::memcmp(now, &poses_[7 * i], sizeof now) != 0) return false;
   }
-  const double ground = w.ground() ? w.ground()->height : NAN;
-  return std::memcmp(&ground, &ground_, sizeof ground) == 0 && w.rigid_data().joints.enabled == joints_enabled_;
+  return w.rigid_data().joints.enabled == joints_enabled_;
 }
 
 void QualityMeter::remember(const World& w) {
@@ -469,7 +638,7 @@ FrameQuality QualityMeter::measure_on_arena(const World& w) {
         extents_[i] = body_extent(def);
       }
     }
-    body_ = body_penetration(w, extents_);
+    body_ = body_penetration(w, extents_, &memo_);
     remember(w);
   }
   FrameQuality quality;

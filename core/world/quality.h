@@ -9,6 +9,8 @@
 #include "world/world.h"
 
 #include <cmath>
+#include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 namespace simbake {
@@ -56,8 +58,24 @@ struct BodyExtent {
 };
 BodyExtent body_extent(const RigidBodyDef& def);
 
-// body_penetration with each body's extent (extents[i] of body i) already known
-PenetrationFigure body_penetration(const World& world, const std::vector<BodyExtent>& extents);
+// What the last calls measured, frame to frame: each candidate's depth with the two bodies'
+// poses then. A candidate whose bodies are where they were has that depth again; else its
+// depth now is at most that depth plus how far any of its samples can have moved through the
+// other body's field (at most the field's Lipschitz constant per metre): a bound that passes
+// over the many pairs of a pile that barely moved and stayed shallow.
+struct DepthMemo {
+  struct Known {
+    PenetrationFigure depth;                // the candidate's figure when measured
+    int a = -1, b = -1;                     // the candidate's bodies in its order then
+    Pose pose_a, pose_b;                    // their mesh poses then
+    const void* shapes[4] = {};             // their shapes and samples then, by address
+  };
+  std::unordered_map<std::uint64_t, Known> last, next;  // by pair (lower, higher body; the ground last)
+};
+// body_penetration with each body's extent (extents[i] of body i) already known, and with
+// `memo` (if given) what the calls before it measured: the same figure
+PenetrationFigure body_penetration(const World& world, const std::vector<BodyExtent>& extents,
+                                   DepthMemo* memo = nullptr);
 
 // The body figure by testing every sample of every pair whose bounding spheres meet: what
 // body_penetration returns, bit for bit (it skips only what cannot be the deepest); the
@@ -66,15 +84,16 @@ PenetrationFigure body_penetration_every_sample(const World& world);
 
 // The figures frame after frame, measuring only what can have changed: the body figure is
 // kept while no body has moved (every body's centre of mass and orientation the same bits,
-// the same shapes, the joints' flags the same), as in a pile gone to sleep. The same figures
-// as measure_quality, bit for bit.
+// the same shapes, the joints' flags the same), as in a pile gone to sleep, and each pair's
+// depth is bounded by what was measured before (DepthMemo). The same figures as
+// measure_quality, bit for bit.
 class QualityMeter {
  public:
   FrameQuality measure(const World& world);
 
  private:
   FrameQuality measure_on_arena(const World& world);
-  bool unchanged(const World& world) const;  // since the body figure was last measured
+  bool unchanged(const World& world);  // since the body figure was last measured
   void remember(const World& world);
 
   std::vector<BodyExtent> extents_;        // (nbody)
@@ -84,6 +103,7 @@ class QualityMeter {
   std::vector<char> joints_enabled_;       // (njoint)
   double ground_ = 0.0;                    // its height (m); NaN: no ground
   PenetrationFigure body_;
+  DepthMemo memo_;
   bool measured_ = false;
 };
 

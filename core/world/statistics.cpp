@@ -77,8 +77,8 @@ double max_penetration(const RigidModel& model, const RigidData& data, const std
       [](double l, double r) { return std::max(l, r); });
 }
 
-void gather_statistics(const RigidModel& model, const RigidData& data, const std::vector<BodyPair>& pairs,
-                       const std::vector<SteppedCloth>& cloths, const WorldSettings& settings, StepStatistics& stats) {
+void gather_statistics(const RigidModel& model, const RigidData& data, const std::vector<SteppedCloth>& cloths,
+                       const WorldSettings& settings, StepStatistics& stats) {
   double kinetic = 0.0, potential = 0.0;
   for (int i = 0; i < model.body_count(); ++i) {
     if (model.defs[i].kinematic) continue;
@@ -103,6 +103,10 @@ void gather_statistics(const RigidModel& model, const RigidData& data, const std
   stats.max_cloth_strain = strain;
   stats.cloth_solver_iterations = iterations;
   stats.cloth_solver_seconds = solver_seconds;
+}
+
+void measure_penetrations(const RigidModel& model, const RigidData& data, const std::vector<BodyPair>& pairs,
+                          const std::vector<SteppedCloth>& cloths, StepStatistics& stats) {
   stats.max_penetration = max_penetration(model, data, pairs);
   stats.cloth_penetration = cloth_penetration(model, data, cloths);
 }

@@ -155,7 +155,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
   if (stopped) return taken;
   {
     StageTimer timer(profile_, Stage::kStatistics);
-    on_threads(settings_.threads, [&] { gather_statistics(rigid_model_, rigid_data_, rigid_scratch_.pairs, cloths_, settings_, stats_); });
+    gather_statistics(rigid_model_, rigid_data_, cloths_, settings_, stats_);
   }
   return n;
 }
@@ -274,6 +274,12 @@ void World::blend_deforming_surfaces(double time) {
   for (size_t b = 0; b < coupling_.surfaces.size(); ++b) {
     if (coupling_.surfaces[b]) rigid_model_.defs[b].shape = coupling_.surfaces[b]->shape_at(coupling_.surfaces[b]->blend(time));
   }
+}
+
+StepStatistics World::statistics(bool penetrations) const {
+  StepStatistics s = stats_;
+  if (penetrations) on_threads(settings_.threads, [&] { measure_penetrations(rigid_model_, rigid_data_, rigid_scratch_.pairs, cloths_, s); });
+  return s;
 }
 
 double World::max_penetration() const {

@@ -87,7 +87,9 @@ class World {
   RigidBodyState body_state(int i) const { return simbake::body_state(rigid_data_, i); }
   Pose body_mesh_pose(int i) const { return simbake::body_mesh_pose(rigid_model_, rigid_data_, i); }
   const WorldSettings& settings() const { return settings_; }
-  const StepStatistics& statistics() const { return stats_; }
+  // What the steps did and what the state is now; the penetration figures are measured (over
+  // the last broad phase's pairs) only when asked for, else NaN
+  StepStatistics statistics(bool penetrations = true) const;
   const StageProfile& profile() const { return profile_; }
   // Deepest penetration of any sample into another body or the ground, now (m, >= 0)
   double max_penetration() const;

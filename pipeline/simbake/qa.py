@@ -168,7 +168,7 @@ class QualityRecorder:
         f = self.figures
         f["substeps"].append(int(substeps))
         f["wall_seconds"].append(float(wall_seconds))
-        stats = world.statistics()
+        stats = world.statistics(penetrations=False)
         f["kinetic_energy"].append(float(stats["kinetic_energy"]))
         fallbacks = sum(int(stats.get(k, 0)) for k in FALLBACKS)
         f["cloth_fallbacks"].append(fallbacks - self._fallbacks)

@@ -155,7 +155,7 @@ class MotionFigures:
             energy = self._start_energy(world, kinetic, potential)
             self.start_speed = fastest
         else:
-            stats = world.statistics()
+            stats = world.statistics(penetrations=False)
             energy = stats["kinetic_energy"] + stats["potential_energy"] + stats["elastic_energy"]
             kinetic = stats["kinetic_energy"]
         if self.start_energy is None and not overlapping:

@@ -393,8 +393,8 @@ class Failing:
     def step_frame(self, *args):
         self.frames += 1
         return self.world.step_frame(*args)
-    def statistics(self):
-        return {**self.world.statistics(), "finite": self.frames < 26}
+    def statistics(self, **kwargs):
+        return {**self.world.statistics(**kwargs), "finite": self.frames < 26}
 
 build = simulate.build_world
 simulate.build_world = lambda *args, **kwargs: Failing(build(*args, **kwargs))

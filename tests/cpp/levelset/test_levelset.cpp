@@ -117,6 +117,32 @@ TEST(AnalyticDistance, Plane) {
 
 // ---------------------------------------------------------------- baked sphere
 
+// The Lipschitz constant the grid reports holds between any two points: pairs at random
+// within and beyond the band, near and far apart, never differ in phi by more than it times
+// their distance, and it is at most sqrt(3) and a little: a distance field differs by at most
+// a voxel between neighbours, and the interpolant of the sphere's cone-shaped centre (phi =
+// |x| - 1) rises by a voxel along all three axes out of one corner
+TEST(VdbLevelSet, LipschitzConstantHoldsBetweenAnyTwoPoints) {
+  const auto ls = baked_sphere(0.1);
+  const double L = ls->lipschitz();
+  EXPECT_GE(L, 1.0);
+  EXPECT_LT(L, 1.01 * std::sqrt(3.0));
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> coordinate(-1.6, 1.6), step(-0.3, 0.3);
+  double steepest = 0.0;
+  for (int k = 0; k < 200000; ++k) {
+    const Vec3 p(coordinate(rng), coordinate(rng), coordinate(rng));
+    const Vec3 q = k % 2 ? Vec3(coordinate(rng), coordinate(rng), coordinate(rng))
+                         : Vec3(p + Vec3(step(rng), step(rng), step(rng)) * (k % 4 == 0 ? 0.01 : 1.0));
+    const double d = (p - q).norm();
+    if (d > 0.0) steepest = std::max(steepest, std::abs(ls->phi(p) - ls->phi(q)) / d);
+  }
+  EXPECT_LE(steepest, L);
+  EXPECT_GT(steepest, 0.9);  // (the pairs did cross the band)
+  EXPECT_EQ(SphereDistance(1.0).lipschitz(), 1.0);
+}
+
+
 // Error near the surface converges about like h^2. PLATFORM.md measured an rms trilinear
 // error of ~0.18 h^2 (R = 1); here 0.18-0.33 h^2 (the mesh's faceting adds ~1e-4). So:
 // - each halving of h must cut the rms error by > 1.5 (h^2 would give 4; the floor from

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "geometry/triangle_intersection.h"
+#include "levelset/vdb_levelset.h"
 #include "test_support.h"
 #include "world/quality.h"
 
@@ -212,6 +213,67 @@ TEST(Quality, MeterKeepsTheFigureOnlyWhileNothingMoves) {
   EXPECT_NEAR(meter.measure(world).body_penetration.depth, 0.01, 1e-12);
   world.rigid_data().x[top].y() -= 0.01;  // pushed 1 cm further in
   EXPECT_NEAR(meter.measure(world).body_penetration.depth, 0.02, 1e-12);
+}
+
+TEST(Quality, MeterTakesTheDepthsOfPairsThatDidNotMoveFromBefore) {
+  // still pairs 4 mm and 6 mm into each other, and a box pushed into another a little
+  // further each frame, then pulled out, then a still box nudged: at every frame the
+  // meter's figure (still pairs' depths from memory) is every sample's, depth and names
+  World world;
+  world.set_ground(GroundDef{});
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(0, 0.5, 0)));
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(0.996, 0.5, 0)));  // 4 mm into body 0
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(4, 0.5, 0)));
+  const int nudged = world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(4, 1.494, 0)));  // 6 mm into body 2
+  world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(8, 0.5, 0)));
+  const int ball = world.add_body(box_body(Vec3(1, 1, 1), 1.0, Vec3(8.2, 1.5, 0.1)));
+  QualityMeter meter;
+  const double pushes[] = {0.0, 0.002, 0.005, 0.009, 0.009, 0.003, 0.0, 0.0};
+  for (int frame = 0; frame < 10; ++frame) {
+    if (frame < 8) world.rigid_data().x[ball].y() = 1.5 - pushes[frame];
+    if (frame == 8) world.rigid_data().x[nudged].y() -= 0.005;  // 11 mm in
+    const PenetrationFigure every = body_penetration_every_sample(world);
+    const PenetrationFigure kept = meter.measure(world).body_penetration;
+    EXPECT_EQ(std::memcmp(&kept.depth, &every.depth, sizeof kept.depth), 0) << "frame " << frame;
+    EXPECT_EQ(kept.a, every.a) << "frame " << frame;
+    EXPECT_EQ(kept.b, every.b) << "frame " << frame;
+    if (frame == 0 || frame == 6) EXPECT_NEAR(every.depth, 0.006, 1e-9);
+    if (frame == 3) EXPECT_NEAR(every.depth, 0.009, 1e-9);
+    if (frame >= 8) EXPECT_NEAR(every.depth, 0.011, 1e-9);
+  }
+}
+
+TEST(Quality, MeterOnGridShapesIsEverySamplesFigureFrameAfterFrame) {
+  // baked boxes and spheres (grids: the meter bounds a pair by its depth before and how far
+  // its samples moved through the other's field) dropped in a heap onto the ground and one
+  // another and left to settle: at every frame the meter's figure is every sample's
+  const TriangleMesh box = make_box_mesh(Vec3(0.4, 0.3, 0.5), 2);
+  const TriangleMesh ball = make_sphere_mesh(0.25, 3);
+  const auto box_grid = VdbLevelSet::bake(box.vertices, box.triangles, 0.04);
+  const auto ball_grid = VdbLevelSet::bake(ball.vertices, ball.triangles, 0.04);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  World world;
+  world.set_ground(GroundDef{});
+  for (int k = 0; k < 24; ++k) {
+    const Vec3 origin(1.2 * unit(rng), 0.3 + 0.4 * k / 3, 1.2 * unit(rng));
+    BodyDesc d = k % 2 ? sphere_body(0.25, 1.0, origin, 3) : box_body(Vec3(0.4, 0.3, 0.5), 1.0, origin, 2);
+    d.shape = k % 2 ? SignedDistancePtr(ball_grid) : SignedDistancePtr(box_grid);
+    d.orientation = Quat(unit(rng) - 0.5, unit(rng) - 0.5, unit(rng) - 0.5, unit(rng) - 0.5).normalized();
+    world.add_body(d);
+  }
+  QualityMeter meter;
+  double deepest = 0.0;
+  for (int frame = 0; frame < 48; ++frame) {
+    const PenetrationFigure every = body_penetration_every_sample(world);
+    const PenetrationFigure kept = meter.measure(world).body_penetration;
+    EXPECT_EQ(std::memcmp(&kept.depth, &every.depth, sizeof kept.depth), 0) << "frame " << frame;
+    EXPECT_EQ(kept.a, every.a) << "frame " << frame;
+    EXPECT_EQ(kept.b, every.b) << "frame " << frame;
+    deepest = std::max(deepest, every.depth);
+    world.step_frame(1.0 / 24.0, 2);
+  }
+  EXPECT_GT(deepest, 0.0);  // (something was inside something)
 }
 
 TEST(Quality, ClothEdgeThroughASphereBetweenVerticesOutside) {
