@@ -329,9 +329,13 @@ Pose relative(const Pose& a, const Pose& b) {
 }
 
 // How far a point within `reach` of the origin moves between two poses (m):
-// |(R1 - R0) s + t1 - t0| <= ||R1 - R0||_F |s| + |t1 - t0|
+// |(R1 - R0) s + t1 - t0| <= ||R1 - R0|| |s| + |t1 - t0|, and R1 - R0 = R0 (R0^T R1 - I) with
+// R0^T R1 a turn by some angle a: its norm 2 sin(a / 2) = sqrt(3 - trace(R0^T R1)) (a little
+// more, for the round-off of the trace)
 double moved(const Pose& from, const Pose& to, double reach) {
-  return (to.rotation - from.rotation).norm() * reach + (to.translation - from.translation).norm();
+  const double trace = (from.rotation.transpose() * to.rotation).trace();
+  const double turn = std::sqrt(std::max(0.0, 3.0 - trace) + 1e-14);
+  return turn * reach + (to.translation - from.translation).norm();
 }
 
 // The depth a candidate measured before can have now at most (INFINITY: no bound): each
