@@ -30,6 +30,14 @@ void offer(PenetrationFigure& deepest, double depth, int a, int b) {
   if (depth > deepest.depth) deepest = PenetrationFigure{depth, a, b};
 }
 
+// Two boxes: also edges crossing between the samples (the separating axes' depth)
+void offer_box_overlap(const World& w, int a, int b, const std::vector<Pose>& poses, PenetrationFigure& deepest) {
+  OrientedBox box_a, box_b;
+  if (oriented_box(w.body_def(a).shape.get(), poses[a], box_a) && oriented_box(w.body_def(b).shape.get(), poses[b], box_b)) {
+    offer(deepest, box_overlap_depth(box_a, box_b), a, b);
+  }
+}
+
 // Samples of body a inside body b, at the current poses
 void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses, PenetrationFigure& deepest) {
   const RigidBodyDef& def_b = w.body_def(b);
@@ -40,11 +48,7 @@ void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses
     const Vec3 p = poses[b].apply_inverse(poses[a].apply(samples.row(s).transpose()));
     if (bounds.contains(p)) offer(deepest, -def_b.shape->phi(p), a, b);
   }
-  // two boxes: also edges crossing between the samples (the separating axes' depth)
-  OrientedBox box_a, box_b;
-  if (oriented_box(w.body_def(a).shape.get(), poses[a], box_a) && oriented_box(def_b.shape.get(), poses[b], box_b)) {
-    offer(deepest, box_overlap_depth(box_a, box_b), a, b);
-  }
+  offer_box_overlap(w, a, b, poses, deepest);
 }
 
 // samples_inside a block of samples at a time (rigid_body.h): a block whose sphere misses b's
@@ -66,10 +70,7 @@ void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses,
       if (bounds.contains(p)) offer(deepest, -def_b.shape->phi(p), a, b);
     }
   }
-  OrientedBox box_a, box_b;
-  if (oriented_box(def_a.shape.get(), poses[a], box_a) && oriented_box(def_b.shape.get(), poses[b], box_b)) {
-    offer(deepest, box_overlap_depth(box_a, box_b), a, b);
-  }
+  offer_box_overlap(w, a, b, poses, deepest);
 }
 
 // Every candidate of the body figure, in the order the figure is defined by: each dynamic
