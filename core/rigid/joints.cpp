@@ -539,6 +539,37 @@ void solve_joints(const RigidModel& model, RigidData& data, JointScratch& js, do
   }
 }
 
+void project_joint_velocities(const RigidModel& model, RigidData& data, JointScratch& js, double dt) {
+  if (model.joints.empty()) return;
+  tbb::parallel_for(0, js.count, [&](int k) {
+    JointComponent& c = js.components[k];
+    // (a component with a body put to sleep, a joint broken or one to a moving kinematic
+    // body since its solve is left as it is)
+    for (int g : c.bodies) {
+      if (data.asleep[g]) return;
+    }
+    for (int j : c.joints) {
+      const JointDef& def = model.joints[j];
+      if (!data.joints.enabled[j]) return;
+      for (int g : {def.body0, def.body1}) {
+        if (g != kWorldBody && moving_kinematic(model, data, g)) return;
+      }
+    }
+    ComponentSolver solver{model, data, js, c, dt};
+    solver.begin();
+    const int m = static_cast<int>(c.rows.size());
+    c.in_solve.assign(m, 0);
+    c.residual.assign(m, 0.0);
+    for (int r = 0; r < m; ++r) {
+      if (c.rows[r].kind != RowKind::kEquality) continue;
+      c.in_solve[r] = 1;
+      c.residual[r] = -solver.rate(c.rows[r]);
+    }
+    solver.c.factored = false;
+    solver.solve(/*first=*/true, /*refactor=*/true);
+  });
+}
+
 JointError joint_error(const RigidModel& model, const RigidData& data, int j) {
   JointError error;
   if (!data.joints.enabled[j]) return error;

@@ -66,6 +66,17 @@ struct JointScratch {
 // step exceeded their break force or torque broken (data.joints)
 void solve_joints(const RigidModel& model, RigidData& data, JointScratch& scratch, double dt, double end_time);
 
+// The velocities of the bodies of the last solve's components made tangent to what their
+// joints hold where the bodies are now: the least kinetic energy change (an M^-1 J^T
+// impulse) that brings every locked coordinate's rate J v to zero. The position step's
+// impulses leave the velocities of the step's middle, (x_end - x_start) / dt, whose rate is
+// off by O(dt); these are the end's (RATTLE, Andersen 1983, beside the step's SHAKE). The
+// next step's solve acts along the same rows and takes the bodies to the same poses, so
+// only what the velocities are read for changes (a cache's velocities, kinetic energy, the
+// contacts), and the kinetic energy only falls. Components with a body asleep, a broken
+// joint or a joint to a moving kinematic body are left as they are. `dt`: the last step's
+void project_joint_velocities(const RigidModel& model, RigidData& data, JointScratch& scratch, double dt);
+
 // Each joint's error now: the largest gap between its frames along what it holds (m) and
 // the largest angle (rad); zeros for a disabled joint
 struct JointError {

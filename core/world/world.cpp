@@ -26,6 +26,9 @@ namespace simbake {
 namespace {
 // (m, rad) a joint error a step ends at above this: its Newton solve did not converge
 constexpr double kUnconvergedJoints = 1e-6;
+// a substep after which a jointed body turns faster than this many joint_turns per step is
+// taken again in shorter ones
+constexpr double kRetakeTurn = 1.25;
 }  // namespace
 
 World::World(const WorldSettings& settings) : settings_(settings) { check_settings(settings); }
@@ -128,6 +131,7 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
         taken = k;
         break;
       }
+      if (replan) retry_ = {rigid_data_, time_, stats_};
       if (k % group == 0) begin_cloth_step();
       blend_deforming_surfaces(time_ + dt);
       step_bodies(dt);
@@ -137,14 +141,28 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
       }
       // a NaN is caught at once and reported, never stepped on
       if (!state_finite(rigid_data_, cloths_)) stats_.finite = false;
-      if (replan && k + 1 < n && n < settings_.max_substeps) {
-        // the rest of the frame in more steps: enough for the fastest turn, and twice as
-        // many while the joints' solve did not converge (light links whipping a heavy body)
+      if (replan && n < settings_.max_substeps) {
         const double turn = jointed_turn_rate(rigid_model_, rigid_data_);
+        const bool unconverged = rigid_scratch_.joints.error > kUnconvergedJoints;
+        // a substep whose joints' solve did not converge, or that left a jointed body turning
+        // much faster than its step allows (a whip: the tip's spin doubles within a substep),
+        // is taken again, shorter, from where it began: such a step is what gains energy
+        if (unconverged || turn * dt > kRetakeTurn * settings_.joint_turn) {
+          rigid_data_ = retry_.data;
+          time_ = retry_.time;
+          stats_ = retry_.stats;
+          const int left = n - k;
+          const double rest = std::max(std::ceil(left * dt * turn / settings_.joint_turn), 2.0 * left);
+          const int steps = std::min(static_cast<int>(rest), settings_.max_substeps - k);
+          dt *= static_cast<double>(left) / steps;
+          n = k + steps;
+          --k;
+          continue;
+        }
+        // the rest of the frame in more steps: enough for the fastest turn
         const int left = n - k - 1;
-        double rest = std::ceil(left * dt * turn / settings_.joint_turn);
-        if (rigid_scratch_.joints.error > kUnconvergedJoints) rest = std::max(rest, 2.0 * left);
-        if (rest > left) {
+        const double rest = std::ceil(left * dt * turn / settings_.joint_turn);
+        if (left > 0 && rest > left) {
           const int steps = std::min(static_cast<int>(rest), settings_.max_substeps - k - 1);
           dt *= static_cast<double>(left) / steps;
           n = k + 1 + steps;
@@ -153,6 +171,10 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
     }
   });
   if (stopped) return taken;
+  if (stats_.finite) {
+    StageTimer timer(profile_, Stage::kJoints);
+    project_joint_velocities(rigid_model_, rigid_data_, rigid_scratch_.joints, dt);
+  }
   {
     StageTimer timer(profile_, Stage::kStatistics);
     gather_statistics(rigid_model_, rigid_data_, cloths_, settings_, stats_);
@@ -182,6 +204,7 @@ void World::step_bodies(double dt) {
     scratch.pairs.clear();
     scratch.contacts.clear();
     time_ += dt;
+    last_substep_ = dt;
     ++stats_.substeps;
     return;
   }
@@ -214,6 +237,7 @@ void World::step_bodies(double dt) {
   stats_.impulses += scratch.impulses;
   scratch.impulses = 0;
   time_ += dt;
+  last_substep_ = dt;
   ++stats_.substeps;
 }
 

@@ -63,6 +63,9 @@ class World {
   // from them (world coordinates); the first call puts it there, still
   void set_deforming_frame(int i, const Points& vertices, SignedDistancePtr shape, double frame_dt);
   double time() const { return time_; }  // (s) simulated so far
+  // (s) the last substep's length: the bodies' velocities are those of its middle along
+  // gravity (the step's kick comes before its drift), their end's are v + dt g / 2
+  double last_substep() const { return last_substep_; }
 
   // Advance one frame of length frame_dt in `substeps` equal steps, or automatic ones when
   // substeps == 0 (which, with joints and no cloth, shorten part-way through the frame when
@@ -111,8 +114,15 @@ class World {
   std::vector<SteppedCloth> cloths_;        // (ncloth) cloths, their state, contacts, self-collision
   ClothCoupling coupling_;                  // the bodies as the cloths' contacts see them
   double time_ = 0.0;                       // simulated time at the start of the step (s)
+  double last_substep_ = 0.0;               // (s)
   StepStatistics stats_;
   StageProfile profile_;
+  // the state a substep began from, while it may be taken again (step_frame)
+  struct Retry {
+    RigidData data;
+    double time = 0.0;
+    StepStatistics stats;
+  } retry_;
 };
 
 }  // namespace simbake

@@ -44,14 +44,15 @@ struct WorldSettings {
                                          // their own, coarser rate (every few substeps)
   double travel_fraction = 0.2;          // automatic substeps: per substep no body travels
                                          // more than this fraction of its thickness
-  double joint_turn = 0.05;              // (rad) automatic substeps: per substep no jointed
+  double joint_turn = 0.1;               // (rad) automatic substeps: per substep no jointed
                                          // body turns more than this, checked again after
-                                         // every substep of a frame. The joints' Newton solve
-                                         // converges less surely as the turn grows; a whip
-                                         // stepped coarsely gains energy and whips faster
-                                         // (the 50-link chain over 4 s: 0.05 rad holds its
-                                         // joints to 1e-10 m in 33 steps a frame, 0.1 rad to
-                                         // 1.3 mm in 24, 0.3 rad blows up in 460)
+                                         // every substep of a frame; a substep that ends
+                                         // turning 1.25 times this, or whose joints' solve did
+                                         // not converge, is taken again, shorter (a whip).
+                                         // Released level for 10 s, chains of 20 to 80 links
+                                         // gain no energy at 0.1 and lose 2-7% of it; at 0.2
+                                         // in half the steps they lose up to 15%, and at 0.05
+                                         // in 2-3 times as many, 1-3%
   int max_substeps = 4096;               // per frame, automatic or not
   int threads = 0;                       // worker threads, in [0, kMaxThreads]; 0 = all cores.
                                          // Results are identical for any count.
