@@ -7,6 +7,8 @@ streams them to disk. A non-finite state stops the bake with SimulationError and
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -553,6 +555,19 @@ def _motion_figures(scene: Scene, assets, cloths) -> MotionFigures:
                          [lumped_masses(a.vertices, a.triangles, c.area_density) for c, a in zip(scene.cloths, cloths)])
 
 
+@contextlib.contextmanager
+def _no_full_collections():
+    """Everything alive before the frames (modules, the scene, the world) set aside from the
+    garbage collector's passes: the frames make short-lived objects by the thousand (a
+    sample's Gf values), and each pass would otherwise walk every object of pxr and NumPy too.
+    What the frames make is still collected."""
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
 def _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, instancing, clips) -> BakeStats:
     total = scene.frame_count
     recorder = QualityRecorder(scene, _motion_figures(scene, assets, cloths)) if qa else None
@@ -561,7 +576,8 @@ def _bake(scene, output, world, assets, cloths, start, on_frame, qa, shot, insta
     with Outputs() as outputs:  # everything staged, then swapped in together (or nothing)
         level_sets = _level_set_files(scene, assets, output, groups, outputs)
         with _cache_writer(scene, output, assets, cloths, instancing, clips, level_sets, outputs) as writer:
-            max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile, assets)
+            with _no_full_collections():
+                max_penetration = _bake_frames(scene, world, writer, recorder, on_frame, pipeline_profile, assets)
         if shot is not None:
             from .usd_layer import write_shot_stage
 

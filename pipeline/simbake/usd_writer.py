@@ -587,7 +587,8 @@ class CacheWriter(StreamingWriter):
         time = float(frame)
         layer = self._layer
         set_sample = layer.SetTimeSample
-        rows_t, rows_q = tr.tolist(), qs.tolist()  # python floats: much faster into Gf
+        # python floats: much faster into Gf (only where a body is sampled on its own prim)
+        rows_t, rows_q = (tr.tolist(), qs.tolist()) if self._dynamic or (first and self._static) else ((), ())
         Vec3d, Quatd, from_numpy = Gf.Vec3d, Gf.Quatd, Vt.Vec3fArray.FromNumpy
         with Sdf.ChangeBlock():
             for i, t_path, q_path in self._dynamic:
