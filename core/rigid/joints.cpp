@@ -279,10 +279,9 @@ struct ComponentSolver {
   }
 
   void predict() {
-    c.rotation_response.resize(c.bodies.size());
     for (std::size_t i = 0; i < c.bodies.size(); ++i) {
       const int g = c.bodies[i];
-      c.candidate[i] = {data.x[g] + h * data.v[g], free_rotation(model.defs[g], data.q[g], data.l[g], h, &c.rotation_response[i])};
+      c.candidate[i] = {data.x[g] + h * data.v[g], free_rotation(model.defs[g], data.q[g], data.l[g], h)};
     }
   }
 
@@ -427,6 +426,14 @@ struct ComponentSolver {
     const int m = static_cast<int>(c.rows.size());
     c.system.set_zero();
     double* values = c.system.data();
+    // how each candidate turns with L, over h (free_rotation's response, from the turn it
+    // makes: asked for only here, where a fresh factorization needs it)
+    if (!first) {
+      c.rotation_response.resize(c.bodies.size());
+      for (std::size_t i = 0; i < c.bodies.size(); ++i) {
+        c.rotation_response[i] = left_jacobian(rotation_vector_from_quat(c.candidate[i].q * c.start[i].q.conjugate())) * c.inverse_inertia[i];
+      }
+    }
     // each row's M^-1 J^T on each of its sides
     c.response.resize(4 * m);
     for (int r = 0; r < m; ++r) {
