@@ -426,12 +426,11 @@ struct ComponentSolver {
     const int m = static_cast<int>(c.rows.size());
     c.system.set_zero();
     double* values = c.system.data();
-    // how each candidate turns with L, over h (free_rotation's response, from the turn it
-    // makes: asked for only here, where a fresh factorization needs it)
+    // how each candidate turns with L, over h (only a fresh factorization needs it)
     if (!first) {
       c.rotation_response.resize(c.bodies.size());
       for (std::size_t i = 0; i < c.bodies.size(); ++i) {
-        c.rotation_response[i] = left_jacobian(rotation_vector_from_quat(c.candidate[i].q * c.start[i].q.conjugate())) * c.inverse_inertia[i];
+        c.rotation_response[i] = rotation_response(c.start[i].q, c.candidate[i].q, c.inverse_inertia[i]);
       }
     }
     // each row's M^-1 J^T on each of its sides
@@ -574,7 +573,6 @@ void project_joint_velocities(const RigidModel& model, RigidData& data, JointScr
       c.in_solve[r] = 1;
       c.residual[r] = -solver.rate(c.rows[r]);
     }
-    solver.c.factored = false;
     solver.solve(/*first=*/true, /*refactor=*/true);
   });
 }

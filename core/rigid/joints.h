@@ -24,7 +24,7 @@ struct JointComponent {
   std::vector<BodyPose> candidate;    // (nlocal) and where their velocities now take them
   std::vector<Mat3> inverse_inertia;  // (nlocal) world I^-1 at the start (1/(kg m^2))
   std::vector<Mat3> rotation_response;  // (nlocal) how the candidate turns with L, over h
-                                      //   (free_rotation, 1/(kg m^2))
+                                      //   (rotation_response, 1/(kg m^2))
   std::vector<JointFrames> frames;    // (njoint of the component) frames at the start
   std::vector<char> in_solve;         // (nrow) rows in this iteration's solve
   std::vector<double> residual;       // (nrow) the solve's right-hand side (0 off the solve)

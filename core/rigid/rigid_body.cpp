@@ -35,23 +35,17 @@ void set_mesh_pose(const RigidBodyDef& def, const Vec3& origin, const Quat& orie
   x = origin + mesh_q * def.center;
 }
 
-Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt, Mat3* response) {
+Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt) {
   // An isotropic body's omega = L / I is constant in the world: q <- exp(dt omega) q, exact,
-  // one rotation; exp(phi + d) = exp(J_l(phi) d) exp(phi), so a change dL turns the end by
-  // J_l(phi) dt dL / I (types.h)
-  if (def.isotropic) {
-    const Vec3 phi = dt * def.inverse_inertia[0] * l;
-    if (response) *response = def.inverse_inertia[0] * left_jacobian(phi);
-    return (quat_from_rotation_vector(phi) * q).normalized();
-  }
+  // one rotation
+  if (def.isotropic) return (quat_from_rotation_vector(dt * def.inverse_inertia[0] * l) * q).normalized();
   // In the body frame the angular momentum is b = R^T L. The flow of the k-th term of the
   // Hamiltonian H_k = b_k^2 / (2 I_k) rotates the body about its k-th axis by dt b_k / I_k
   // (q <- q rot_k) and b the opposite way (b <- rot_k^-1 b); b_k itself is unchanged.
   // The splitting's error grows with the square of the angle turned per step: a step that
   // turns the body more than kMaxTurn about any axis is taken as that many equal pieces (a
   // fast spinner then drifts as little at long steps as at short ones; a body at rest or
-  // tumbling slowly takes one piece). Its response to L is taken as that of the step's
-  // rotation turned at a fixed rate, J_l times the inverse inertia
+  // tumbling slowly takes one piece)
   static constexpr double kMaxTurn = 0.03;  // (rad)
   static constexpr int kAxis[5] = {0, 1, 2, 1, 0};
   static constexpr double kFraction[5] = {0.5, 0.5, 1.0, 0.5, 0.5};
@@ -71,9 +65,7 @@ Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double
       b = rotation.conjugate() * b;
     }
   }
-  result.normalize();
-  if (response) *response = left_jacobian(rotation_vector_from_quat(result * q.conjugate())) * world_inverse_inertia(def, q);
-  return result;
+  return result.normalized();
 }
 
 Quat prescribed_rotation(const Quat& q, const Vec3& omega, double dt) {

@@ -125,11 +125,16 @@ inline Vec3 angular_velocity(const RigidBodyDef& def, const RigidBodyState& stat
 // should. McLachlan 1993; Touma and Wisdom 1994. A step turning the body more than 0.03 rad
 // about an axis is taken in equal pieces (the error grows with the square of the turn).
 // An isotropic body (def.isotropic) turns exactly, about L at the rate |L| / I, in one rotation.
-// `response`, when given, takes how the end orientation turns with the angular momentum: the
+Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt);
+
+// How the end `to` of a torque-free turn from `from` turns with the angular momentum: the
 // world rotation vector of the change per change of L, over dt (1/(kg m^2)), so that for small
-// turns it is the world inverse inertia; exact for isotropic bodies, for the
-// others the left Jacobian of the step's rotation times the inverse inertia at q
-Quat free_rotation(const RigidBodyDef& def, const Quat& q, const Vec3& l, double dt, Mat3* response = nullptr);
+// turns it is the world inverse inertia at `from` (`inverse_inertia`): the left Jacobian of the
+// step's rotation times it. Exact for an isotropic body turning less than half a turn; for the
+// others it takes the step as a turn at a fixed rate
+inline Mat3 rotation_response(const Quat& from, const Quat& to, const Mat3& inverse_inertia) {
+  return left_jacobian(rotation_vector_from_quat(to * from.conjugate())) * inverse_inertia;
+}
 
 // Rotation of a kinematic body spinning at a fixed world angular velocity omega over dt
 Quat prescribed_rotation(const Quat& q, const Vec3& omega, double dt);

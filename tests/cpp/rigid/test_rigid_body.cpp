@@ -95,10 +95,10 @@ TEST(RigidBody, StableAxisSpinDoesNotFlip) {
   }
 }
 
-// free_rotation's response (how the end turns per change of L, over dt) against central
-// differences of the end itself: exact for an isotropic body (1e-6 of it, the differences'
-// own error at h = 1e-5); for the brick, taken as a fixed-rate turn, off by less than the
-// step's turn (rad) relative to it
+// rotation_response of a free_rotation step (how the end turns per change of L, over dt)
+// against central differences of the end itself: exact for an isotropic body (1e-6 of it, the
+// differences' own error at h = 1e-5); for the brick, taken as a fixed-rate turn, off by less
+// than the step's turn (rad) relative to it
 TEST(RigidBody, RotationResponseMatchesFiniteDifferences) {
   RigidBodyDef ball;
   ball.inertia = Vec3::Constant(0.4);
@@ -108,8 +108,8 @@ TEST(RigidBody, RotationResponseMatchesFiniteDifferences) {
   const Quat q0(Eigen::AngleAxisd(0.8, Vec3(1, 2, -1).normalized()));
   const double h = 1e-5;
   for (const auto& [def, dt] : {std::pair{ball, 0.3}, std::pair{brick_def(), 0.05}}) {
-    Mat3 response;
-    const Quat end = free_rotation(def, q0, l, dt, &response);
+    const Quat end = free_rotation(def, q0, l, dt);
+    const Mat3 response = rotation_response(q0, end, world_inverse_inertia(def, q0));
     Mat3 differences;
     for (int k = 0; k < 3; ++k) {
       const Vec3 dl = h * Vec3::Unit(k);
