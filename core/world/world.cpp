@@ -144,6 +144,16 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
       if (replan && n < settings_.max_substeps) {
         const double turn = jointed_turn_rate(rigid_model_, rigid_data_);
         const bool unconverged = rigid_scratch_.joints.error > kUnconvergedJoints;
+        // the substeps from `from` on, as many as the fastest turn asks and at least
+        // `at_least` times as many (within max_substeps), the frame's time shared among them
+        const auto spread_rest = [&](int from, double at_least) {
+          const int left = n - from;
+          const double wanted = std::max(std::ceil(left * dt * turn / settings_.joint_turn), at_least * left);
+          if (!(wanted > left)) return;
+          const int steps = std::min(static_cast<int>(wanted), settings_.max_substeps - from);
+          dt *= static_cast<double>(left) / steps;
+          n = from + steps;
+        };
         // a substep whose joints' solve did not converge, or that left a jointed body turning
         // much faster than its step allows (a whip: the tip's spin doubles within a substep),
         // is taken again, shorter, from where it began: such a step is what gains energy
@@ -151,22 +161,11 @@ int World::step_frame(double frame_dt, int substeps, const std::function<bool()>
           rigid_data_ = retry_.data;
           time_ = retry_.time;
           stats_ = retry_.stats;
-          const int left = n - k;
-          const double rest = std::max(std::ceil(left * dt * turn / settings_.joint_turn), 2.0 * left);
-          const int steps = std::min(static_cast<int>(rest), settings_.max_substeps - k);
-          dt *= static_cast<double>(left) / steps;
-          n = k + steps;
+          spread_rest(k, 2.0);
           --k;
           continue;
         }
-        // the rest of the frame in more steps: enough for the fastest turn
-        const int left = n - k - 1;
-        const double rest = std::ceil(left * dt * turn / settings_.joint_turn);
-        if (left > 0 && rest > left) {
-          const int steps = std::min(static_cast<int>(rest), settings_.max_substeps - k - 1);
-          dt *= static_cast<double>(left) / steps;
-          n = k + 1 + steps;
-        }
+        spread_rest(k + 1, 0.0);
       }
     }
   });
