@@ -38,22 +38,42 @@ void offer_box_overlap(const World& w, int a, int b, const std::vector<Pose>& po
   }
 }
 
+// Samples [first, end) of body a inside body b's bounds, at the current poses
+void sample_range_inside(const World& w, int a, int b, const std::vector<Pose>& poses, Eigen::Index first,
+                         Eigen::Index end, PenetrationFigure& deepest) {
+  const SignedDistance& shape_b = *w.body_def(b).shape;
+  const Box3 bounds = shape_b.bounds();
+  const Points& samples = w.body_def(a).samples;
+  for (Eigen::Index s = first; s < end; ++s) {
+    const Vec3 p = poses[b].apply_inverse(poses[a].apply(samples.row(s).transpose()));
+    if (bounds.contains(p)) offer(deepest, -shape_b.phi(p), a, b);
+  }
+}
+
+// Samples [first, end) of body a below the ground
+void sample_range_below_ground(const World& w, int a, const std::vector<Pose>& poses, Eigen::Index first,
+                               Eigen::Index end, PenetrationFigure& deepest) {
+  const double height = w.ground()->height;
+  const Points& samples = w.body_def(a).samples;
+  for (Eigen::Index s = first; s < end; ++s) offer(deepest, height - poses[a].apply(samples.row(s).transpose()).y(), a, -1);
+}
+
+// The samples of sample block k of body a (rigid_body.h)
+std::pair<Eigen::Index, Eigen::Index> block_samples(const RigidBodyDef& def, size_t k) {
+  const Eigen::Index first = static_cast<Eigen::Index>(k) * SampleBlock::kSize;
+  return {first, std::min<Eigen::Index>(first + SampleBlock::kSize, def.samples.rows())};
+}
+
 // Samples of body a inside body b, at the current poses
 void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses, PenetrationFigure& deepest) {
-  const RigidBodyDef& def_b = w.body_def(b);
-  if (!def_b.shape) return;
-  const Box3 bounds = def_b.shape->bounds();
-  const Points& samples = w.body_def(a).samples;
-  for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-    const Vec3 p = poses[b].apply_inverse(poses[a].apply(samples.row(s).transpose()));
-    if (bounds.contains(p)) offer(deepest, -def_b.shape->phi(p), a, b);
-  }
+  if (!w.body_def(b).shape) return;
+  sample_range_inside(w, a, b, poses, 0, w.body_def(a).samples.rows(), deepest);
   offer_box_overlap(w, a, b, poses, deepest);
 }
 
-// samples_inside a block of samples at a time (rigid_body.h): a block whose sphere misses b's
-// bounds is passed over, its samples' points would all fail bounds.contains; the same depths
-// of the same samples
+// samples_inside a block of samples at a time: a block whose sphere misses b's bounds is
+// passed over, its samples' points would all fail bounds.contains; the same depths of the
+// same samples
 void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses, PenetrationFigure& deepest) {
   const RigidBodyDef& def_b = w.body_def(b);
   if (!def_b.shape) return;
@@ -63,12 +83,8 @@ void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses,
     const Vec3 c = poses[b].apply_inverse(poses[a].apply(def_a.sample_blocks[k].centre));
     const double gap = (c.cwiseMax(bounds.min()).cwiseMin(bounds.max()) - c).norm();
     if (gap > SampleBlock::slackened(c, def_a.sample_blocks[k].margin)) continue;
-    const Eigen::Index first = static_cast<Eigen::Index>(k) * SampleBlock::kSize;
-    const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, def_a.samples.rows());
-    for (Eigen::Index s = first; s < end; ++s) {
-      const Vec3 p = poses[b].apply_inverse(poses[a].apply(def_a.samples.row(s).transpose()));
-      if (bounds.contains(p)) offer(deepest, -def_b.shape->phi(p), a, b);
-    }
+    const auto [first, end] = block_samples(def_a, k);
+    sample_range_inside(w, a, b, poses, first, end, deepest);
   }
   offer_box_overlap(w, a, b, poses, deepest);
 }
@@ -380,11 +396,8 @@ PenetrationFigure candidate_depth_by_blocks(const World& w, const Candidate& c, 
       const Vec3 centre = poses[c.a].apply(def.sample_blocks[k].centre);
       const double lowest = centre.y() - SampleBlock::slackened(centre, def.sample_blocks[k].margin);
       if (!(height - lowest > deepest.depth)) continue;
-      const Eigen::Index first = static_cast<Eigen::Index>(k) * SampleBlock::kSize;
-      const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, def.samples.rows());
-      for (Eigen::Index s = first; s < end; ++s) {
-        offer(deepest, height - poses[c.a].apply(def.samples.row(s).transpose()).y(), c.a, -1);
-      }
+      const auto [first, end] = block_samples(def, k);
+      sample_range_below_ground(w, c.a, poses, first, end, deepest);
     }
     return deepest;
   }
@@ -397,11 +410,7 @@ PenetrationFigure candidate_depth_by_blocks(const World& w, const Candidate& c, 
 PenetrationFigure candidate_depth(const World& w, const Candidate& c, const std::vector<Pose>& poses) {
   PenetrationFigure deepest;
   if (c.b < 0) {
-    const double height = w.ground()->height;
-    const Points& samples = w.body_def(c.a).samples;
-    for (Eigen::Index s = 0; s < samples.rows(); ++s) {
-      offer(deepest, height - poses[c.a].apply(samples.row(s).transpose()).y(), c.a, -1);
-    }
+    sample_range_below_ground(w, c.a, poses, 0, w.body_def(c.a).samples.rows(), deepest);
     return deepest;
   }
   samples_inside(w, c.a, c.b, poses, deepest);
@@ -593,14 +602,14 @@ ClothQuality cloth_quality(const World& w, int c) {
   return q;
 }
 
-bool QualityMeter::unchanged(const World& w) {
-  const int n = w.body_count();
+bool QualityMeter::same_bodies_and_ground(const World& w) const {
   const double ground = w.ground() ? w.ground()->height : NAN;
-  // (another ground, or other bodies: no depth measured before holds)
-  if (!measured_ || static_cast<int>(poses_.size()) != 7 * n || std::memcmp(&ground, &ground_, sizeof ground) != 0) {
-    memo_.last.clear();
-    return false;
-  }
+  return measured_ && static_cast<int>(poses_.size()) == 7 * w.body_count() && std::memcmp(&ground, &ground_, sizeof ground) == 0;
+}
+
+bool QualityMeter::unchanged(const World& w) const {
+  if (!same_bodies_and_ground(w)) return false;
+  const int n = w.body_count();
   for (int i = 0; i < n; ++i) {
     const RigidBodyDef& def = w.body_def(i);
     if (shapes_[2 * i] != def.shape.get() || shapes_[2 * i + 1] != def.samples.data()) return false;
@@ -635,6 +644,8 @@ FrameQuality QualityMeter::measure(const World& w) {
 
 FrameQuality QualityMeter::measure_on_arena(const World& w) {
   if (!unchanged(w)) {
+    // (another ground, or other bodies: no depth measured before holds)
+    if (!same_bodies_and_ground(w)) memo_.last.clear();
     extents_.resize(w.body_count());
     for (int i = 0; i < w.body_count(); ++i) {
       const RigidBodyDef& def = w.body_def(i);

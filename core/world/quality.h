@@ -93,7 +93,8 @@ class QualityMeter {
 
  private:
   FrameQuality measure_on_arena(const World& world);
-  bool unchanged(const World& world);  // since the body figure was last measured
+  bool same_bodies_and_ground(const World& world) const;  // as when last measured (by count)
+  bool unchanged(const World& world) const;  // since the body figure was last measured
   void remember(const World& world);
 
   std::vector<BodyExtent> extents_;        // (nbody)
