@@ -46,9 +46,9 @@ constexpr double kDivergence = 1e-6;    // (m, rad) an error this small never co
 // which a 50-link chain makes thousands)
 constexpr double kLoopRegularization = 1e-5;
 // a Newton step on the last factorization (its Jacobian a step old) is kept while it takes
-// the error down at least this much; a slower one asks for a fresh factorization (0.2: the
-// ragdoll's joints 20% faster than at 0.05, where more steps refactored than the extra chord
-// iterations cost; 0.3 and 0.5 slower again)
+// the error down at least this much; a slower one asks for a fresh factorization (a chord
+// step costs a solve, a fresh one a factorization: a stricter rate refactors more often
+// than the chord iterations it saves are worth, a looser one iterates longer)
 constexpr double kChordRate = 0.2;
 constexpr double kTreeRegularization = 1e-9;
 

@@ -49,10 +49,9 @@ struct WorldSettings {
                                          // every substep of a frame; a substep that ends
                                          // turning 1.25 times this, or whose joints' solve did
                                          // not converge, is taken again, shorter (a whip).
-                                         // Released level for 10 s, chains of 20 to 80 links
-                                         // gain no energy at 0.1 and lose 2-7% of it; at 0.2
-                                         // in half the steps they lose up to 15%, and at 0.05
-                                         // in 2-3 times as many, 1-3%
+                                         // Fewer, longer steps lose more of a mechanism's
+                                         // energy, and from about 0.2 some gain
+                                         // (benchmarks/rigid/joint_turn.py)
   int max_substeps = 4096;               // per frame, automatic or not
   int threads = 0;                       // worker threads, in [0, kMaxThreads]; 0 = all cores.
                                          // Results are identical for any count.

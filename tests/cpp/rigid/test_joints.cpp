@@ -313,13 +313,12 @@ TEST(Joints, FiftyLinkChainStaysClosed) {
 
 // Chains released at a tilt, at the automatic substeps of 24 fps frames: the energy at a
 // frame's end never rises above the start (the whips are stepped again, shorter, where a
-// substep turned too far; a step gaining energy at a whip gained 0.2 to 7 J here) by more
-// than the second-order term the frame's end velocity carries, twice the energy of a half
+// substep turned too far) by more than the second-order term the frame's end velocity carries, twice the energy of a half
 // kick of gravity over the longest substep, M (g dt / 2)^2 (a few mJ; the end velocity is
 // taken as v - dt g / 2, see World::last_substep), and the velocities a frame ends with are
 // the joints' own: both
 // links' velocity at every joint's anchor the same (to round-off, where the position step
-// alone leaves them apart by O(dt): up to 0.9 m/s here)
+// alone leaves them apart by O(dt))
 TEST(Joints, ReleasedChainsGainNoEnergyAndEndFramesWithJointVelocities) {
   for (const auto& [links, tilt] : {std::pair{20, 0.0}, std::pair{50, 0.5}, std::pair{35, -0.3}}) {
     World world = chain(links, 0.1, 0.1, 0.1, 0, tilt);
