@@ -136,14 +136,20 @@ bool NarrowPhase::samples_inside(int a, int b, double s, double margin, std::vec
     local_bounds.min().array() -= margin;
     local_bounds.max().array() += margin;
   }
-  // (whole blocks of samples first: most of a body's samples are far from the other)
-  const std::vector<SampleBlock>& blocks = model_.defs[a].sample_blocks;
+  // (whole groups and blocks of samples first: most of a body's samples are far from the
+  // other; and a block whose sphere lies outside b's box, margin and all, in b's frame: its
+  // samples' points would all fail local_bounds.contains)
   const double slackened = b == kGround ? SampleBlock::slackened(ground_offset)
                                         : SampleBlock::slackened(centre_in_a, model_.defs[b].bounding_radius + margin);
-  for (std::size_t block = 0; block < blocks.size(); ++block) {
-    if (b == kGround ? !blocks[block].may_be_below(down_in_a, ground_offset, slackened)
-                     : !blocks[block].may_reach(centre_in_a, slackened)) {
-      continue;
+  auto near = [&](const SampleBlock& block) {
+    return b == kGround ? block.may_be_below(down_in_a, ground_offset, slackened) : block.may_reach(centre_in_a, slackened);
+  };
+  for_sample_blocks(model_.defs[a], near, [&](std::size_t block) {
+    if (b != kGround) {
+      const SampleBlock& sphere = model_.defs[a].sample_blocks[block];
+      const Vec3 c = pose_b.apply_inverse(pose_a.apply(sphere.centre));
+      const double gap = (c.cwiseMax(local_bounds.min()).cwiseMin(local_bounds.max()) - c).norm();
+      if (gap > SampleBlock::slackened(c, sphere.margin)) return;
     }
     const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
     const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
@@ -170,7 +176,7 @@ bool NarrowPhase::samples_inside(int a, int b, double s, double margin, std::vec
       }
       out.push_back({a, b, scratch_.candidate_poses[a].apply(m), n, phi, m, s});
     }
-  }
+  });
   box_edge_crossing(a, b, s, margin, out);
   return out.size() > before;
 }

@@ -20,6 +20,26 @@ std::vector<SampleBlock> sample_blocks(const Points& samples) {
   return blocks;
 }
 
+std::vector<SampleBlock> sample_groups(const std::vector<SampleBlock>& blocks) {
+  std::vector<SampleBlock> groups;
+  for (std::size_t first = 0; first < blocks.size(); first += kGroup) {
+    const std::size_t end = std::min(blocks.size(), first + kGroup);
+    SampleBlock group;
+    for (std::size_t k = first; k < end; ++k) group.centre += blocks[k].centre;
+    group.centre /= static_cast<double>(end - first);
+    double margin = 0.0;
+    for (std::size_t k = first; k < end; ++k) {
+      const double apart = (blocks[k].centre - group.centre).norm();
+      group.radius = std::max(group.radius, apart + blocks[k].radius);
+      margin = std::max(margin, apart + blocks[k].margin);
+    }
+    // (the slack again, for the round-off of the distances between the centres)
+    group.margin = margin + 1e-9 * (group.centre.norm() + group.radius);
+    groups.push_back(group);
+  }
+  return groups;
+}
+
 Pose mesh_pose(const RigidBodyDef& def, const Vec3& x, const Quat& q) {
   // a mesh point m sits at x + R(q) P^T (m - c): rotation R(q) P^T, translation x - R c
   Pose pose;

@@ -43,6 +43,11 @@ struct SampleBlock {
 // The blocks of kSize consecutive samples, in sample order
 std::vector<SampleBlock> sample_blocks(const Points& samples);
 
+// The groups of kGroup consecutive blocks, each one sphere holding its blocks' spheres (its
+// margin holds theirs: a group whose test fails holds no block whose test passes)
+inline constexpr int kGroup = 8;
+std::vector<SampleBlock> sample_groups(const std::vector<SampleBlock>& blocks);
+
 struct RigidBodyDef {
   double inverse_mass = 0.0;                 // (1/kg); 0 for kinematic bodies
   Vec3 inertia = Vec3::Zero();               // principal moments (kg m^2)
@@ -63,9 +68,25 @@ struct RigidBodyDef {
   const SphereDistance* sphere = nullptr;    // the shape when it is a sphere (exact sphere contacts)
   Points samples;                            // (s x 3) surface samples in mesh coordinates (m)
   std::vector<SampleBlock> sample_blocks;    // (ceil(s / 8)) their bounding spheres, in order
+  std::vector<SampleBlock> sample_groups;    // (ceil(blocks / kGroup)) the blocks', likewise
   double bounding_radius = 0.0;              // largest |sample - center| (m)
   double thickness = 0.0;                    // smallest extent of the shape (m), for substeps
 };
+
+// Visits (visit(k)) every sample block k of the body that passes `test` (a SampleBlock ->
+// bool that holds for a block's sphere whenever for one inside it: may_reach, may_be_below),
+// in order, testing each group of blocks first and passing over the groups that fail
+template <class Test, class Visit>
+void for_sample_blocks(const RigidBodyDef& def, const Test& test, const Visit& visit) {
+  const std::size_t count = def.sample_blocks.size();
+  for (std::size_t g = 0; g < def.sample_groups.size(); ++g) {
+    if (!test(def.sample_groups[g])) continue;
+    const std::size_t end = std::min(count, (g + 1) * static_cast<std::size_t>(kGroup));
+    for (std::size_t k = g * kGroup; k < end; ++k) {
+      if (test(def.sample_blocks[k])) visit(k);
+    }
+  }
+}
 
 struct RigidBodyState {
   Vec3 x = Vec3::Zero();          // centre of mass, world (m)

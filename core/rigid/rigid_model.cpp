@@ -52,6 +52,7 @@ RigidBodyDef make_body_def(const BodyDesc& desc) {
   def.sphere = dynamic_cast<const SphereDistance*>(def.shape.get());
   def.samples = desc.samples;
   def.sample_blocks = sample_blocks(def.samples);
+  def.sample_groups = sample_groups(def.sample_blocks);
   def.center = desc.unit_mass.center;
 
   // principal axes of the inertia tensor, as a proper rotation

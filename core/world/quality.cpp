@@ -79,13 +79,15 @@ void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses,
   if (!def_b.shape) return;
   const Box3 bounds = def_b.shape->bounds();
   const RigidBodyDef& def_a = w.body_def(a);
-  for (size_t k = 0; k < def_a.sample_blocks.size(); ++k) {
-    const Vec3 c = poses[b].apply_inverse(poses[a].apply(def_a.sample_blocks[k].centre));
+  auto may_reach_bounds = [&](const SampleBlock& sphere) {
+    const Vec3 c = poses[b].apply_inverse(poses[a].apply(sphere.centre));
     const double gap = (c.cwiseMax(bounds.min()).cwiseMin(bounds.max()) - c).norm();
-    if (gap > SampleBlock::slackened(c, def_a.sample_blocks[k].margin)) continue;
+    return gap <= SampleBlock::slackened(c, sphere.margin);
+  };
+  for_sample_blocks(def_a, may_reach_bounds, [&](size_t k) {
     const auto [first, end] = block_samples(def_a, k);
     sample_range_inside(w, a, b, poses, first, end, deepest);
-  }
+  });
   offer_box_overlap(w, a, b, poses, deepest);
 }
 
@@ -392,13 +394,14 @@ PenetrationFigure candidate_depth_by_blocks(const World& w, const Candidate& c, 
   if (c.b < 0) {
     const double height = w.ground()->height;
     const RigidBodyDef& def = w.body_def(c.a);
-    for (size_t k = 0; k < def.sample_blocks.size(); ++k) {
-      const Vec3 centre = poses[c.a].apply(def.sample_blocks[k].centre);
-      const double lowest = centre.y() - SampleBlock::slackened(centre, def.sample_blocks[k].margin);
-      if (!(height - lowest > deepest.depth)) continue;
+    auto may_be_deeper = [&](const SampleBlock& sphere) {
+      const Vec3 centre = poses[c.a].apply(sphere.centre);
+      return height - (centre.y() - SampleBlock::slackened(centre, sphere.margin)) > deepest.depth;
+    };
+    for_sample_blocks(def, may_be_deeper, [&](size_t k) {
       const auto [first, end] = block_samples(def, k);
       sample_range_below_ground(w, c.a, poses, first, end, deepest);
-    }
+    });
     return deepest;
   }
   blocks_inside(w, c.a, c.b, poses, deepest);

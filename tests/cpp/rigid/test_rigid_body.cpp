@@ -3,6 +3,9 @@
 
 #include "test_support.h"
 
+#include <random>
+#include <vector>
+
 using namespace simbake;
 
 namespace {
@@ -126,5 +129,52 @@ TEST(RigidBody, RotationResponseMatchesFiniteDifferences) {
       EXPECT_LT(error, turn);
     }
     std::printf("rotation response (%s): step turn %.3f rad, relative error %.2e\n", def.isotropic ? "ball" : "brick", turn, error);
+  }
+}
+
+// The groups of sample blocks only pass over what the blocks' own tests would reject: for
+// the samples of a torus-like ring (blocks spread around it) and points near and far, with
+// reaches from a hair to the whole ring, for_sample_blocks visits exactly the blocks whose
+// own may_reach holds (and, below planes, whose may_be_below holds), in order, and skips
+// whole groups where it can
+TEST(RigidBody, SampleGroupsVisitExactlyTheBlocksThatPass) {
+  Points samples(1000, 3);
+  for (int k = 0; k < samples.rows(); ++k) {
+    const double u = 0.0251 * k, v = 0.37 * k;
+    samples.row(k) << (1.0 + 0.3 * std::cos(v)) * std::cos(u), 0.3 * std::sin(v), (1.0 + 0.3 * std::cos(v)) * std::sin(u);
+  }
+  RigidBodyDef def;
+  def.samples = samples;
+  def.sample_blocks = sample_blocks(samples);
+  def.sample_groups = sample_groups(def.sample_blocks);
+  ASSERT_EQ(def.sample_groups.size(), (def.sample_blocks.size() + kGroup - 1) / kGroup);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0), reach(0.0, 1.5);
+  long long skipped = 0;
+  for (int query = 0; query < 2000; ++query) {
+    const Vec3 point = 1.5 * Vec3(unit(rng), unit(rng), unit(rng));
+    const double slackened = SampleBlock::slackened(point, reach(rng));
+    const Vec3 down = Vec3(unit(rng), unit(rng), unit(rng)).normalized();
+    const double offset = unit(rng), offset_slack = SampleBlock::slackened(offset);
+    for (int test = 0; test < 2; ++test) {
+      auto passes = [&](const SampleBlock& b) {
+        return test == 0 ? b.may_reach(point, slackened) : b.may_be_below(down, offset, offset_slack);
+      };
+      std::vector<std::size_t> expected, visited;
+      for (std::size_t k = 0; k < def.sample_blocks.size(); ++k) {
+        if (passes(def.sample_blocks[k])) expected.push_back(k);
+      }
+      for_sample_blocks(def, passes, [&](std::size_t k) { visited.push_back(k); });
+      ASSERT_EQ(visited, expected) << "query " << query << " test " << test;
+      for (const SampleBlock& group : def.sample_groups) skipped += !passes(group);
+    }
+  }
+  EXPECT_GT(skipped, 1000);  // (the groups do pass over blocks)
+  // a group's sphere holds its blocks' samples
+  for (std::size_t k = 0; k < def.sample_blocks.size(); ++k) {
+    const SampleBlock& group = def.sample_groups[k / kGroup];
+    for (Eigen::Index s = k * SampleBlock::kSize; s < std::min<Eigen::Index>((k + 1) * SampleBlock::kSize, samples.rows()); ++s) {
+      EXPECT_LE((samples.row(s).transpose() - group.centre).norm(), group.radius * (1.0 + 1e-12));
+    }
   }
 }
