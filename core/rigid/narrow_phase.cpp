@@ -142,15 +142,10 @@ bool NarrowPhase::samples_inside(int a, int b, double s, double margin, std::vec
   const double slackened = b == kGround ? SampleBlock::slackened(ground_offset)
                                         : SampleBlock::slackened(centre_in_a, model_.defs[b].bounding_radius + margin);
   auto near = [&](const SampleBlock& block) {
-    return b == kGround ? block.may_be_below(down_in_a, ground_offset, slackened) : block.may_reach(centre_in_a, slackened);
+    if (b == kGround) return block.may_be_below(down_in_a, ground_offset, slackened);
+    return block.may_reach(centre_in_a, slackened) && block.may_be_in(local_bounds, pose_b.apply_inverse(pose_a.apply(block.centre)));
   };
   for_sample_blocks(model_.defs[a], near, [&](std::size_t block) {
-    if (b != kGround) {
-      const SampleBlock& sphere = model_.defs[a].sample_blocks[block];
-      const Vec3 c = pose_b.apply_inverse(pose_a.apply(sphere.centre));
-      const double gap = (c.cwiseMax(local_bounds.min()).cwiseMin(local_bounds.max()) - c).norm();
-      if (gap > SampleBlock::slackened(c, sphere.margin)) return;
-    }
     const Eigen::Index first = static_cast<Eigen::Index>(block) * SampleBlock::kSize;
     const Eigen::Index end = std::min<Eigen::Index>(first + SampleBlock::kSize, samples.rows());
     for (Eigen::Index k = first; k < end; ++k) {

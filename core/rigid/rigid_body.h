@@ -38,6 +38,11 @@ struct SampleBlock {
   bool may_be_below(const Vec3& down, double offset, double offset_slack) const {
     return centre.dot(down) + offset < margin + offset_slack;
   }
+  // Whether a sample of the block may lie in `box`, with the block's centre at `moved` in the
+  // box's frame (a non-finite centre may: its samples are tested one by one)
+  bool may_be_in(const Box3& box, const Vec3& moved) const {
+    return !((moved.cwiseMax(box.min()).cwiseMin(box.max()) - moved).norm() > slackened(moved, margin));
+  }
 };
 
 // The blocks of kSize consecutive samples, in sample order

@@ -80,9 +80,7 @@ void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses,
   const Box3 bounds = def_b.shape->bounds();
   const RigidBodyDef& def_a = w.body_def(a);
   auto may_reach_bounds = [&](const SampleBlock& sphere) {
-    const Vec3 c = poses[b].apply_inverse(poses[a].apply(sphere.centre));
-    const double gap = (c.cwiseMax(bounds.min()).cwiseMin(bounds.max()) - c).norm();
-    return gap <= SampleBlock::slackened(c, sphere.margin);
+    return sphere.may_be_in(bounds, poses[b].apply_inverse(poses[a].apply(sphere.centre)));
   };
   for_sample_blocks(def_a, may_reach_bounds, [&](size_t k) {
     const auto [first, end] = block_samples(def_a, k);
