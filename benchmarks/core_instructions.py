@@ -12,7 +12,9 @@ thread, which callgrind's toggle follows):
 * box1000: the peer benchmark's pile of 1,000 boxes (benchmarks/peers/scenes.py), frames 1-24;
 * drape65: assets/scenes/drape.toml at 65 x 65 vertices, frames 1-25;
 * drape129: the same at 129 x 129, frames 1-12 (the sheet reaches the sphere at frame 6);
-* cloth_demo: assets/scenes/cloth_demo.toml, frames 1-12.
+* cloth_demo: assets/scenes/cloth_demo.toml, frames 1-12;
+* pile_mesh: assets/scenes/pile.toml (200 tori, L-shapes and spheres: samples against level
+  sets), frames 1-30.
 
 Prints a table (instructions before, after, after / before) and writes it to
 benchmarks/results/core_instructions.md. Valgrind makes each run about 50x slower than native.
@@ -42,12 +44,15 @@ def _ranged(text: str, end: int) -> str:
 
 def workloads() -> dict[str, str]:
     drape = (SCENES / "drape.toml").read_text()
-    demo = (SCENES / "cloth_demo.toml").read_text().replace('"../meshes/', f'"{ROOT / "assets" / "meshes"}/')
+    meshes = f'"{ROOT / "assets" / "meshes"}/'
+    demo = (SCENES / "cloth_demo.toml").read_text().replace('"../meshes/', meshes)
+    pile = (SCENES / "pile.toml").read_text().replace('"../meshes/', meshes)
     return {
         "box1000": _box1000(24),
         "drape65": _ranged(drape, 25),  # (64 cells a side: 65 vertices)
         "drape129": _ranged(drape.replace("resolution = [64, 64]", "resolution = [128, 128]"), 12),
         "cloth_demo": _ranged(demo, 12),
+        "pile_mesh": _ranged(pile, 30),
     }
 
 
