@@ -24,6 +24,7 @@
 #include <openvdb/tools/MeshToVolume.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <mutex>
 #include <stdexcept>
@@ -292,27 +293,39 @@ double VdbLevelSet::phi(const Vec3& p) const {
 
 double VdbLevelSet::lipschitz() const {
   std::call_once(impl_->lipschitz_once, [this] {
+    // The cells with a voxel of a leaf as a corner are those whose low corner lies in the
+    // leaf's 8^3 voxels grown by one below: 9^3 cells, whose corners are the 10^3 values from
+    // one below the leaf's origin to one past its end. The leaf's own values are read from it,
+    // the shell around them through the accessor (tiles, the background, other leaves)
     QueryAccessor acc(*impl_->tree);
+    constexpr int kSide = FloatTree::LeafNodeType::DIM + 2;
+    std::array<float, kSide * kSide * kSide> values;
+    auto at = [](int x, int y, int z) { return (x * kSide + y) * kSide + z; };
     double steepest = 0.0;  // (index space: per voxel)
     for (auto leaf = impl_->tree->cbeginLeaf(); leaf; ++leaf) {
-      const openvdb::CoordBBox inside = leaf->getNodeBoundingBox();
-      for (auto v = leaf->cbeginValueAll(); v; ++v) {
-        // the cells with this voxel as a corner: the one it is the low corner of, and those
-        // reaching out of the leaf below it (the others are another voxel's of the leaf)
-        for (int o = 0; o < 8; ++o) {
-          const Coord low = v.getCoord() - Coord(o & 1, (o >> 1) & 1, (o >> 2) & 1);
-          if (o != 0 && inside.isInside(low)) continue;
-          float c[2][2][2];
-          openvdb::tools::BoxSampler::getValues(c, acc, low);
-          // the gradient at corner (i, j, k) is its three edges' differences, and anywhere in
-          // the cell the corners' gradients blended by the trilinear weights
-          for (int i = 0; i < 2; ++i) {
-            for (int j = 0; j < 2; ++j) {
-              for (int k = 0; k < 2; ++k) {
-                const double gx = static_cast<double>(c[1][j][k]) - c[0][j][k];
-                const double gy = static_cast<double>(c[i][1][k]) - c[i][0][k];
-                const double gz = static_cast<double>(c[i][j][1]) - c[i][j][0];
-                steepest = std::max(steepest, std::sqrt(gx * gx + gy * gy + gz * gz));
+      const Coord below = leaf->origin() - Coord(1, 1, 1);
+      for (int x = 0; x < kSide; ++x) {
+        for (int y = 0; y < kSide; ++y) {
+          for (int z = 0; z < kSide; ++z) {
+            const bool own = x >= 1 && y >= 1 && z >= 1 && x < kSide - 1 && y < kSide - 1 && z < kSide - 1;
+            values[at(x, y, z)] = own ? leaf->getValue(static_cast<openvdb::Index>(64 * (x - 1) + 8 * (y - 1) + (z - 1)))
+                                      : acc.getValue(below + Coord(x, y, z));
+          }
+        }
+      }
+      for (int x = 0; x + 1 < kSide; ++x) {
+        for (int y = 0; y + 1 < kSide; ++y) {
+          for (int z = 0; z + 1 < kSide; ++z) {
+            // the gradient at corner (i, j, k) is its three edges' differences, and anywhere
+            // in the cell the corners' gradients blended by the trilinear weights
+            for (int i = 0; i < 2; ++i) {
+              for (int j = 0; j < 2; ++j) {
+                for (int k = 0; k < 2; ++k) {
+                  const double gx = static_cast<double>(values[at(x + 1, y + j, z + k)]) - values[at(x, y + j, z + k)];
+                  const double gy = static_cast<double>(values[at(x + i, y + 1, z + k)]) - values[at(x + i, y, z + k)];
+                  const double gz = static_cast<double>(values[at(x + i, y + j, z + 1)]) - values[at(x + i, y + j, z)];
+                  steepest = std::max(steepest, std::sqrt(gx * gx + gy * gy + gz * gz));
+                }
               }
             }
           }

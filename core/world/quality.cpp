@@ -38,14 +38,19 @@ void offer_box_overlap(const World& w, int a, int b, const std::vector<Pose>& po
   }
 }
 
-// Samples [first, end) of body a inside body b's bounds, at the current poses
-void sample_range_inside(const World& w, int a, int b, const std::vector<Pose>& poses, Eigen::Index first,
-                         Eigen::Index end, PenetrationFigure& deepest) {
+// Body a's pose in body b's frame (b's pose the identity: in the world)
+Pose relative(const Pose& a, const Pose& b) {
+  return Pose{b.rotation.transpose() * a.rotation, b.rotation.transpose() * (a.translation - b.translation)};
+}
+
+// Samples [first, end) of body a inside body b's bounds, a_in_b a's pose in b's frame
+void sample_range_inside(const World& w, int a, int b, const Pose& a_in_b, Eigen::Index first, Eigen::Index end,
+                         PenetrationFigure& deepest) {
   const SignedDistance& shape_b = *w.body_def(b).shape;
   const Box3 bounds = shape_b.bounds();
   const Points& samples = w.body_def(a).samples;
   for (Eigen::Index s = first; s < end; ++s) {
-    const Vec3 p = poses[b].apply_inverse(poses[a].apply(samples.row(s).transpose()));
+    const Vec3 p = a_in_b.apply(samples.row(s).transpose());
     if (bounds.contains(p)) offer(deepest, -shape_b.phi(p), a, b);
   }
 }
@@ -67,7 +72,7 @@ std::pair<Eigen::Index, Eigen::Index> block_samples(const RigidBodyDef& def, siz
 // Samples of body a inside body b, at the current poses
 void samples_inside(const World& w, int a, int b, const std::vector<Pose>& poses, PenetrationFigure& deepest) {
   if (!w.body_def(b).shape) return;
-  sample_range_inside(w, a, b, poses, 0, w.body_def(a).samples.rows(), deepest);
+  sample_range_inside(w, a, b, relative(poses[a], poses[b]), 0, w.body_def(a).samples.rows(), deepest);
   offer_box_overlap(w, a, b, poses, deepest);
 }
 
@@ -79,12 +84,11 @@ void blocks_inside(const World& w, int a, int b, const std::vector<Pose>& poses,
   if (!def_b.shape) return;
   const Box3 bounds = def_b.shape->bounds();
   const RigidBodyDef& def_a = w.body_def(a);
-  auto may_reach_bounds = [&](const SampleBlock& sphere) {
-    return sphere.may_be_in(bounds, poses[b].apply_inverse(poses[a].apply(sphere.centre)));
-  };
+  const Pose a_in_b = relative(poses[a], poses[b]);
+  auto may_reach_bounds = [&](const SampleBlock& sphere) { return sphere.may_be_in(bounds, a_in_b.apply(sphere.centre)); };
   for_sample_blocks(def_a, may_reach_bounds, [&](size_t k) {
     const auto [first, end] = block_samples(def_a, k);
-    sample_range_inside(w, a, b, poses, first, end, deepest);
+    sample_range_inside(w, a, b, a_in_b, first, end, deepest);
   });
   offer_box_overlap(w, a, b, poses, deepest);
 }
@@ -334,15 +338,10 @@ void shapes_of(const World& w, int a, int b, const void* out[4]) {
   out[3] = b < 0 ? nullptr : w.body_def(b).samples.data();
 }
 
-bool same_shapes(const World& w, const Candidate& c, const DepthMemo::Known& known) {
+bool same_shapes(const World& w, const DepthMemo::Known& known) {
   const void* now[4];
   shapes_of(w, known.a, known.b, now);
   return std::memcmp(now, known.shapes, sizeof now) == 0;
-}
-
-// Body a's pose in body b's frame (b's pose the identity: in the world)
-Pose relative(const Pose& a, const Pose& b) {
-  return Pose{b.rotation.transpose() * a.rotation, b.rotation.transpose() * (a.translation - b.translation)};
 }
 
 // How far a point within `reach` of the origin moves between two poses (m):
@@ -365,7 +364,7 @@ double motion_bound(const World& w, const Candidate& c, const DepthMemo::Known& 
   const bool same = known.a == c.a && known.b == c.b;  // (else the poses are the other way round)
   const Pose& then_a = same ? known.pose_a : known.pose_b;
   const Pose& then_b = same ? known.pose_b : known.pose_a;
-  if (!same_shapes(w, c, known)) return INFINITY;
+  if (!same_shapes(w, known)) return INFINITY;
   if (!reach[c.a].finite || (c.b >= 0 && !reach[c.b].finite)) return INFINITY;
   double motion = 0.0;
   if (c.b < 0) {
@@ -512,7 +511,7 @@ PenetrationFigure body_penetration(const World& w, const std::vector<BodyExtent>
       const DepthMemo::Known* k = known[batch[t]];
       // (the same bodies where they were, in the same order: the same figure)
       if (k && k->a == c.a && k->b == c.b && same_pose(k->pose_a, poses[c.a]) &&
-          (c.b < 0 || same_pose(k->pose_b, poses[c.b])) && same_shapes(w, c, *k)) {
+          (c.b < 0 || same_pose(k->pose_b, poses[c.b])) && same_shapes(w, *k)) {
         depths[t] = k->depth;
         return;
       }

@@ -323,17 +323,50 @@ TEST(VdbLevelSet, WriteReadRoundTrip) {
 // the same grid, at points on both sides of every leaf boundary of a line through the band,
 // the same value to the sampler's float round-off (|phi| < 1.5 m: under 2e-7 m); a corner
 // read from the wrong offset errs by up to a voxel (25 mm)
-TEST(VdbLevelSet, PhiMatchesOpenVdbSamplerInsideAndAcrossLeaves) {
-  const double h = 0.025;
-  const auto ls = baked_sphere(h);
-  const std::string path = temp_path("sampler.vdb");
-  ls->write(path);
+// The level set's grid as OpenVDB itself reads it back from a file (the tests' reference)
+openvdb::FloatGrid::Ptr openvdb_grid(const VdbLevelSet& ls, const std::string& name) {
+  const std::string path = temp_path(name);
+  ls.write(path);
   openvdb::initialize();
   openvdb::io::File file(path);
   file.open();
   const auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.getGrids()->front());
   file.close();
   std::filesystem::remove(path);
+  return grid;
+}
+
+// The constant is the steepest corner gradient of every cell of the grid: here every cell of
+// the leaves' bounding box grown by a voxel, each read through OpenVDB's own sampler lookups
+// (cells of tiles and background alone are flat, so the box's cells give the same maximum)
+TEST(VdbLevelSet, LipschitzConstantIsTheSteepestCellOfTheGrid) {
+  for (const double h : {0.1, 0.05}) {
+    const auto ls = baked_sphere(h);
+    const auto grid = openvdb_grid(*ls, "lipschitz.vdb");
+    ASSERT_TRUE(grid);
+    openvdb::CoordBBox box;
+    grid->tree().evalLeafBoundingBox(box);
+    box.expand(1);
+    const auto acc = grid->getConstAccessor();
+    double steepest = 0.0;
+    for (auto low = box.begin(); low; ++low) {
+      float c[2][2][2];
+      openvdb::tools::BoxSampler::getValues(c, acc, *low);
+      for (int i = 0; i < 2; ++i)
+        for (int j = 0; j < 2; ++j)
+          for (int k = 0; k < 2; ++k) {
+            const double g[3] = {double(c[1][j][k]) - c[0][j][k], double(c[i][1][k]) - c[i][0][k], double(c[i][j][1]) - c[i][j][0]};
+            steepest = std::max(steepest, std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]));
+          }
+    }
+    EXPECT_EQ(ls->lipschitz(), std::max(1.0, steepest / h) * (1.0 + 1e-6)) << "h " << h;
+  }
+}
+
+TEST(VdbLevelSet, PhiMatchesOpenVdbSamplerInsideAndAcrossLeaves) {
+  const double h = 0.025;
+  const auto ls = baked_sphere(h);
+  const auto grid = openvdb_grid(*ls, "sampler.vdb");
   ASSERT_TRUE(grid);
   const openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(*grid);
   std::mt19937 rng(7);
